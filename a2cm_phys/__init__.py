@@ -1,0 +1,28 @@
+"""a2cm_phys: cooperative multi-agent pursuit–evasion on a grid and in pymunk physics,
+with the A2C and A2CM trainers of Paczolay & Harmati (2021).
+
+The data path: ``config`` (scenario) → ``envs`` (game cores and APIs) → ``rollout`` →
+``algos`` (models, returns, learner) → ``record`` (MCAP logs) → ``replay`` / ``plot``.
+"""
+
+from __future__ import annotations
+
+from importlib.metadata import PackageNotFoundError, version
+
+import gymnasium
+
+from .config import ConfigError, Scenario, load_scenario
+from .envs.parallel import PursuitParallelEnv, make_env
+
+try:
+    __version__ = version("a2cm_phys")
+except PackageNotFoundError:  # running from a source tree that is not installed
+    __version__ = "0.0.0+unknown"
+
+GYM_ID = "a2cm_phys/Pursuit-v0"
+"""Gymnasium id of the joint view (kwarg ``scenario``)."""
+
+if GYM_ID not in gymnasium.registry:
+    gymnasium.register(id=GYM_ID, entry_point="a2cm_phys.envs.gym:PursuitEnv")
+
+__all__ = ["ConfigError", "GYM_ID", "PursuitParallelEnv", "Scenario", "load_scenario", "make_env"]

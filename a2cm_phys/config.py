@@ -1,0 +1,336 @@
+"""Scenario and training configuration: frozen dataclasses loaded from TOML and validated.
+
+A scenario is data (VMAS-style): the engine owns the loop. Every value that reaches the
+engine goes through :func:`build`, whether it came from a TOML file, from ``make_env``
+keyword overrides or from ``--set key=value`` on the command line, so the same checks and
+the same error messages apply everywhere. Errors are :class:`ConfigError`, whose message
+names the source (file) and the dotted key at fault.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+import types
+import typing
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
+"""Folder of the named scenarios shipped with the package (``scenarios/*.toml``)."""
+
+Mode = Literal["grid", "physics"]
+EvaderPolicy = Literal["random", "flee", "static"]
+CollisionMode = Literal["off", "terminate", "penalize"]
+Algo = Literal["a2c", "a2cm"]
+
+
+class ConfigError(ValueError):
+    """A scenario or training setting is wrong; the message names the source and the key."""
+
+
+@dataclass(frozen=True)
+class Rewards:
+    """Team reward terms (SPEC §4); the reward is logged raw, learners may scale it."""
+
+    step: float = -1.0
+    collision: float = 0.0
+    capture: float = 0.0
+    wall: float = 0.0
+
+
+@dataclass(frozen=True)
+class Collisions:
+    """How pursuer–pursuer collisions count: ``off``, ``terminate`` or ``penalize``."""
+
+    mode: CollisionMode = "off"
+
+
+@dataclass(frozen=True)
+class Physics:
+    """Physical parameters of physics mode (SPEC §3); one grid cell is one metre."""
+
+    box_side: float = 0.6
+    evader_radius: float = 0.3
+    mass: float = 1.0
+    max_speed: float = 1.0
+    substeps: int = 10
+    wall_thickness: float = 1.0
+    max_force: float = 50.0
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the key of the first impossible value."""
+        for key in ("box_side", "evader_radius", "mass", "max_speed", "wall_thickness", "max_force"):
+            if not getattr(self, key) > 0:
+                raise _KeyError(f"physics.{key}", f"must be > 0, got {getattr(self, key)!r}")
+        if self.box_side >= 1.0:
+            raise _KeyError("physics.box_side", f"must be < 1 (one cell), got {self.box_side!r}")
+        if self.evader_radius >= 0.5:
+            raise _KeyError("physics.evader_radius", f"must be < 0.5, got {self.evader_radius!r}")
+        if self.substeps < 1:
+            raise _KeyError("physics.substeps", f"must be >= 1, got {self.substeps!r}")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One pursuit game: arena, agents, evader, time limit, rewards and collision mode."""
+
+    name: str = "custom"
+    mode: Mode = "grid"
+    size: int = 5
+    pursuers: int = 3
+    actions: int = 4
+    evader: EvaderPolicy = "random"
+    max_steps: int = 1000
+    rewards: Rewards = field(default_factory=Rewards)
+    collisions: Collisions = field(default_factory=Collisions)
+    physics: Physics = field(default_factory=Physics)
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the key of the first impossible value."""
+        if self.size < 2:
+            raise _KeyError("size", f"must be >= 2, got {self.size}")
+        border = 4 * (self.size - 1)
+        if not 1 <= self.pursuers <= border:
+            raise _KeyError(
+                "pursuers", f"must be between 1 and {border} (the border cells), got {self.pursuers}"
+            )
+        if self.pursuers + 1 > self.size * self.size:
+            raise _KeyError("pursuers", "leave no free cell for the evader")
+        if self.actions not in (4, 5):
+            raise _KeyError("actions", f"must be 4 (paper) or 5 (adds stay), got {self.actions}")
+        if self.max_steps < 1:
+            raise _KeyError("max_steps", f"must be >= 1, got {self.max_steps}")
+        self.physics.validate()
+
+    @property
+    def agents(self) -> list[str]:
+        """Names of the learning pursuers, in order."""
+        return [f"pursuer_{i}" for i in range(self.pursuers)]
+
+    @property
+    def obs_dim(self) -> int:
+        """Length of the global observation vector (SPEC §5)."""
+        per_agent = 4 if self.mode == "physics" else 2
+        return per_agent * (self.pursuers + 1)
+
+
+@dataclass(frozen=True)
+class Train:
+    """Training settings (SPEC §6); the defaults are the paper's hyperparameters."""
+
+    algo: Algo = "a2cm"
+    updates: int = 5000
+    batch_size: int = 128
+    num_envs: int = 1
+    seed: int = 0
+    lr: float = 7e-3
+    rmsprop_alpha: float = 0.9
+    rmsprop_eps: float = 1e-7
+    gamma: float = 0.99
+    entropy_coef: float = 1e-4
+    value_coef: float = 0.5
+    hidden: int = 128
+    reward_scale: float = 1.0
+    max_grad_norm: float = 0.0
+    device: str = "cpu"
+    threads: int = 1
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the key of the first impossible value."""
+        for key in ("updates", "batch_size", "num_envs", "hidden", "threads"):
+            if getattr(self, key) < 1:
+                raise _KeyError(key, f"must be >= 1, got {getattr(self, key)}")
+        if self.batch_size % self.num_envs:
+            raise _KeyError(
+                "batch_size",
+                f"{self.batch_size} is not a multiple of num_envs={self.num_envs}",
+            )
+        if not 0.0 <= self.gamma <= 1.0:
+            raise _KeyError("gamma", f"must be in [0, 1], got {self.gamma}")
+        for key in ("lr", "reward_scale"):
+            if not getattr(self, key) > 0:
+                raise _KeyError(key, f"must be > 0, got {getattr(self, key)}")
+        for key in ("entropy_coef", "value_coef", "max_grad_norm", "rmsprop_eps"):
+            if getattr(self, key) < 0:
+                raise _KeyError(key, f"must be >= 0, got {getattr(self, key)}")
+        if not 0.0 <= self.rmsprop_alpha < 1.0:
+            raise _KeyError("rmsprop_alpha", f"must be in [0, 1), got {self.rmsprop_alpha}")
+
+    @property
+    def steps_per_env(self) -> int:
+        """Rollout length per environment in one update."""
+        return self.batch_size // self.num_envs
+
+
+class _KeyError(ValueError):
+    """Internal: a validation failure carrying the dotted key it concerns."""
+
+    def __init__(self, key: str, message: str) -> None:
+        super().__init__(message)
+        self.key = key
+
+
+# --------------------------------------------------------------------------- building
+
+
+def build(cls: type, data: Mapping[str, Any], source: str, prefix: str = "") -> Any:
+    """Build dataclass ``cls`` from nested ``data``, checking keys, types and values.
+
+    ``source`` names where the data came from (a file path, ``"overrides"``), and is put
+    in front of every error message together with the dotted key at fault.
+    """
+    try:
+        obj = _build(cls, data, prefix)
+        if hasattr(obj, "validate"):
+            obj.validate()
+        return obj
+    except _KeyError as err:
+        key = f"{prefix}{err.key}" if prefix and not err.key.startswith(prefix) else err.key
+        raise ConfigError(f"{source}: key '{key}': {err}") from None
+
+
+def _build(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
+    if not isinstance(data, Mapping):
+        raise _KeyError(prefix.rstrip(".") or "<root>", f"expected a table, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        known = ", ".join(fields)
+        raise _KeyError(f"{prefix}{unknown[0]}", f"unknown key (known keys: {known})")
+    kwargs = {}
+    for name, value in data.items():
+        key, hint = f"{prefix}{name}", hints[name]
+        if dataclasses.is_dataclass(hint):
+            kwargs[name] = _build(hint, value, f"{key}.")
+        else:
+            kwargs[name] = _coerce(value, hint, key)
+    return cls(**kwargs)
+
+
+def _coerce(value: Any, hint: Any, key: str) -> Any:
+    origin = typing.get_origin(hint)
+    if origin is Literal:
+        choices = typing.get_args(hint)
+        if value not in choices:
+            raise _KeyError(key, f"must be one of {', '.join(map(repr, choices))}, got {value!r}")
+        return value
+    if origin in (typing.Union, types.UnionType):
+        raise TypeError(f"unsupported annotation for {key}: {hint}")
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise _KeyError(key, f"must be a number, got {value!r}")
+        return float(value)
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise _KeyError(key, f"must be an integer, got {value!r}")
+        return value
+    if hint is str and not isinstance(value, str):
+        raise _KeyError(key, f"must be a string, got {value!r}")
+    return value
+
+
+def to_dict(obj: Any) -> dict[str, Any]:
+    """A plain nested dict of a config dataclass (for JSON, MCAP metadata, TOML)."""
+    return dataclasses.asdict(obj)
+
+
+# --------------------------------------------------------------------------- overrides
+
+
+def parse_assignments(items: Iterable[str], source: str = "--set") -> dict[str, Any]:
+    """Parse ``key=value`` strings; values are read as TOML (``-1``, ``"flee"``, ``true``).
+
+    A bare word that is not valid TOML is taken as a string, so ``evader=flee`` works.
+    """
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ConfigError(f"{source}: '{item}' is not of the form key=value")
+        try:
+            out[key] = tomllib.loads(f"v = {raw.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key] = raw.strip()
+    return out
+
+
+def merge_overrides(data: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """Return ``data`` updated with ``overrides``; dotted keys and nested dicts both work."""
+    merged: dict[str, Any] = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in data.items()}
+    for dotted, value in overrides.items():
+        *parents, leaf = dotted.split(".")
+        table = merged
+        for part in parents:
+            table = table.setdefault(part, {})
+            if not isinstance(table, dict):
+                raise ConfigError(f"overrides: key '{dotted}': '{part}' is not a table")
+        if isinstance(value, Mapping) and isinstance(table.get(leaf), Mapping):
+            table[leaf] = merge_overrides(table[leaf], value)
+        else:
+            table[leaf] = value
+    return merged
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def scenario_names() -> list[str]:
+    """Names of the scenarios shipped in ``scenarios/``."""
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+
+
+def resolve_scenario_path(scenario: str | Path) -> Path:
+    """A scenario name (``grid``) or a path to a TOML file, as an existing path."""
+    path = Path(scenario)
+    if path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise ConfigError(f"{path}: no such scenario file")
+        return path
+    named = SCENARIO_DIR / f"{scenario}.toml"
+    if not named.is_file():
+        raise ConfigError(
+            f"unknown scenario '{scenario}' (named scenarios: {', '.join(scenario_names())};"
+            " or give a path to a .toml file)"
+        )
+    return named
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    """Read a TOML file, turning syntax errors into a :class:`ConfigError` naming the file."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{path}: invalid TOML: {err}") from None
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read: {err.strerror}") from None
+
+
+def load_scenario(
+    scenario: str | Path | Scenario, overrides: Mapping[str, Any] | None = None
+) -> Scenario:
+    """Load a named or file scenario (or take a :class:`Scenario`), apply overrides, validate.
+
+    Overrides are checked exactly like the file: ``load_scenario("grid", {"size": 1})``
+    fails with a message naming ``overrides`` and the key ``size``.
+    """
+    if isinstance(scenario, Scenario):
+        data, source = to_dict(scenario), f"scenario '{scenario.name}'"
+    else:
+        path = resolve_scenario_path(scenario)
+        data, source = read_toml(path), str(path)
+        data.setdefault("name", path.stem)
+    if overrides:
+        build(Scenario, data, source)  # the file alone must be valid, and be blamed if not
+        data, source = merge_overrides(data, overrides), f"{source} (with overrides)"
+    return build(Scenario, data, source)
+
+
+def load_train(overrides: Mapping[str, Any] | None = None, source: str = "training options") -> Train:
+    """A validated :class:`Train` from the defaults and ``overrides``."""
+    return build(Train, dict(overrides or {}), source)

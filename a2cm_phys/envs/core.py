@@ -1,0 +1,138 @@
+"""What every simulation core (grid, physics) shares: the step outcome and start positions.
+
+A *core* steps a batch of ``B`` independent games; the parallel, Gymnasium and vector APIs
+are thin layers over it. Each core implements :class:`Core`: ``reset(envs, seeds,
+positions)`` (re)starts some of its games, ``step(actions)`` advances all of them and
+returns a :class:`StepOutcome`, ``observe()`` gives the global observations.
+
+Each game carries its own *episode seed*: every random number of an episode (the evader's
+moves) is a pure function of that seed and the step counter (see :mod:`.evader`), so an
+episode can be re-simulated from its seed and the pursuers' actions alone, whatever batch
+it was played in.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from ..config import Scenario
+
+ACTION_NAMES = ("up", "down", "left", "right", "stay")
+"""Discrete actions (SPEC §1): 0 up (+y), 1 down (−y), 2 left (−x), 3 right (+x), 4 stay."""
+
+ACTION_DELTAS = np.array([(0, 1), (0, -1), (-1, 0), (1, 0), (0, 0)], dtype=np.int64)
+"""Unit displacement ``(dx, dy)`` of each action, indexed by action."""
+
+
+@dataclass
+class StepOutcome:
+    """What happened in one step of every game of a batch (arrays of length ``B``).
+
+    ``events`` is, in physics mode, one list per game of contact events
+    ``(kind, a, b, step)`` that began in this step; in grid mode it is ``None``.
+    """
+
+    reward: np.ndarray  # float64, raw team reward
+    terminated: np.ndarray  # bool: capture, or a collision in "terminate" mode
+    truncated: np.ndarray  # bool: reached max_steps without termination
+    captured: np.ndarray  # bool
+    collisions: np.ndarray  # int64: pursuer pairs that collided in this step
+    wall_contacts: np.ndarray  # int64: pursuer moves or contacts against a wall
+    evader_action: np.ndarray  # int64: the evader's move, for logs and replays
+    events: list[list[tuple[str, str, str, int]]] | None = None
+
+
+class Core(Protocol):
+    """A batch of ``num_envs`` games of one scenario; see the module docstring."""
+
+    scenario: Scenario
+    num_envs: int
+    t: np.ndarray  # (B,) steps taken in the current episode
+    episode_seed: np.ndarray  # (B,) uint64
+
+    def reset(
+        self,
+        envs: np.ndarray,
+        seeds: np.ndarray,
+        positions: Sequence[Mapping[str, Sequence[float]] | None] | None = None,
+    ) -> None:
+        """Start new episodes in games ``envs`` with episode ``seeds``."""
+
+    def step(self, actions: np.ndarray) -> StepOutcome:
+        """Advance every game by one step with pursuer ``actions`` of shape ``(B, N)``."""
+
+    def observe(self) -> np.ndarray:
+        """Global observations, float32 of shape ``(B, obs_dim)`` (SPEC §5)."""
+
+    def positions(self) -> np.ndarray:
+        """Agent positions ``(B, N + 1, 2)``: pursuers, then the evader (cells or metres)."""
+
+    def velocities(self) -> np.ndarray | None:
+        """Agent velocities ``(B, N + 1, 2)`` in m/s (physics mode), else ``None``."""
+
+
+def agent_names(scenario: Scenario) -> list[str]:
+    """All agents of a game, pursuers first and the evader last."""
+    return [*scenario.agents, "evader"]
+
+
+def default_start(size: int, pursuers: int) -> np.ndarray:
+    """Start cells ``(N + 1, 2)`` (SPEC §1): corners, then the border; evader in the centre."""
+    top = size - 1
+    corners = [(0, 0), (top, 0), (0, top), (top, top)]
+    border = [(x, 0) for x in range(size)] + [(top, y) for y in range(1, size)]
+    border += [(x, top) for x in range(top - 1, -1, -1)] + [(0, y) for y in range(top - 1, 0, -1)]
+    order = corners + [c for c in border if c not in corners]
+    centre = (size // 2, size // 2)
+    cells = [c for c in order if c != centre][:pursuers]
+    return np.array([*cells, centre], dtype=np.int64)
+
+
+def parse_positions(
+    scenario: Scenario, positions: Mapping[str, Sequence[float]], low: float, high: float
+) -> np.ndarray:
+    """Validate ``reset(options={"positions": …})`` and return ``(N + 1, 2)`` float positions.
+
+    Agents not named keep their default start. Positions must lie in ``[low, high]`` on
+    both axes; grid positions must be integer cells. Raises ``ValueError`` naming the
+    agent and the value at fault.
+    """
+    names = agent_names(scenario)
+    out = default_start(scenario.size, scenario.pursuers).astype(np.float64)
+    if scenario.mode == "physics":
+        out += 0.5
+    unknown = sorted(set(positions) - set(names))
+    if unknown:
+        raise ValueError(f"positions: unknown agent {unknown[0]!r} (agents: {', '.join(names)})")
+    for agent, value in positions.items():
+        try:
+            xy = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"positions[{agent!r}] = {value!r} is not an (x, y) pair") from None
+        if xy.shape != (2,) or not np.all(np.isfinite(xy)):
+            raise ValueError(f"positions[{agent!r}] = {value!r} is not an (x, y) pair")
+        if scenario.mode == "grid" and not np.all(xy == np.round(xy)):
+            raise ValueError(f"positions[{agent!r}] = {value!r} is not an integer cell")
+        if np.any(xy < low) or np.any(xy > high):
+            raise ValueError(
+                f"positions[{agent!r}] = {value!r} is off the arena (each coordinate in "
+                f"[{low:g}, {high:g}])"
+            )
+        out[names.index(agent)] = xy
+    return out
+
+
+def check_actions(actions: np.ndarray, n_actions: int, names: Sequence[str]) -> None:
+    """Raise ``ValueError`` naming the agent and value of the first action out of range."""
+    bad = (actions < 0) | (actions >= n_actions)
+    if bad.any():
+        env, agent = (int(i) for i in np.argwhere(bad)[0])
+        where = f" in env {env}" if actions.shape[0] > 1 else ""
+        raise ValueError(
+            f"invalid action {int(actions[env, agent])} for {names[agent]}{where}:"
+            f" expected an integer in [0, {n_actions})"
+        )

@@ -1,0 +1,86 @@
+"""One game over a core: seeding, reset options and action checks shared by the single-game
+APIs (the PettingZoo-style parallel env and the Gymnasium joint view)."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from ..config import Scenario
+from ..render import render_rgb, render_text
+from .core import Core, StepOutcome, check_actions
+from .factory import make_core
+
+
+class Game:
+    """A single game of ``scenario``: one core with ``B = 1`` plus its seed generator.
+
+    ``reset(seed)`` seeds the generator that draws episode seeds; a later ``reset()``
+    without a seed draws the next episode seed from it (unseeded at first use: OS entropy).
+    """
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        self.core: Core = make_core(scenario, 1)
+        self.names = scenario.agents
+        self._seeds: np.random.Generator | None = None
+        self.last: StepOutcome | None = None
+
+    def reset(self, seed: int | None = None, options: Mapping[str, Any] | None = None) -> int:
+        """Start an episode; returns its episode seed. ``options["positions"]`` places agents."""
+        if seed is not None or self._seeds is None:
+            self._seeds = np.random.default_rng(seed)
+        episode_seed = int(self._seeds.integers(0, 2**63))
+        options = dict(options or {})
+        positions = options.pop("positions", None)
+        if options:  # PettingZoo's API test passes an unknown option: warn, don't fail
+            warnings.warn(f"reset: ignoring unknown option(s) {', '.join(sorted(options))}", stacklevel=3)
+        if positions is not None and not isinstance(positions, Mapping):
+            raise ValueError(f"options['positions'] must be a dict agent -> (x, y), got {positions!r}")
+        self.core.reset(np.array([0]), np.array([episode_seed], dtype=np.uint64), [positions])
+        self.last = None
+        return episode_seed
+
+    def step(self, joint_action: np.ndarray) -> StepOutcome:
+        """Advance the game with the pursuers' actions ``(N,)``; raises on invalid actions."""
+        actions = np.asarray(joint_action).reshape(1, -1)
+        if actions.shape[1] != len(self.names) or not np.issubdtype(actions.dtype, np.integer):
+            raise ValueError(
+                f"expected {len(self.names)} integer actions (one per pursuer), got {joint_action!r}"
+            )
+        check_actions(actions, self.scenario.actions, self.names)
+        self.last = self.core.step(actions.astype(np.int64))
+        return self.last
+
+    def observation(self) -> np.ndarray:
+        """The global observation vector (SPEC §5)."""
+        return self.core.observe()[0]
+
+    def info(self) -> dict[str, Any]:
+        """Per-step facts for ``infos``: captured, collisions, wall contacts, events, t."""
+        last = self.last
+        info: dict[str, Any] = {"t": int(self.core.t[0])}
+        if last is None:
+            return info
+        info.update(
+            captured=bool(last.captured[0]),
+            collisions=int(last.collisions[0]),
+            wall_contacts=int(last.wall_contacts[0]),
+            evader_action=int(last.evader_action[0]),
+        )
+        if last.events is not None:
+            info["events"] = list(last.events[0])
+        return info
+
+    def render(self, mode: str | None) -> str | np.ndarray | None:
+        """A text picture (``ansi``) or an RGB array (``rgb_array``) of the arena, or ``None``."""
+        positions = self.core.positions()[0]
+        if mode == "ansi":
+            return render_text(self.scenario, positions)
+        if mode == "rgb_array":
+            velocities = self.core.velocities()
+            return render_rgb(self.scenario, positions, None if velocities is None else velocities[0])
+        return None

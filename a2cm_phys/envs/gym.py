@@ -1,0 +1,59 @@
+"""Gymnasium id ``a2cm_phys/Pursuit-v0``: the joint view of the game (SPEC §8).
+
+One ``MultiDiscrete`` action holds every pursuer's action; the reward is the team reward.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from ..config import Scenario, load_scenario
+from .game import Game
+from .parallel import observation_space
+
+
+class PursuitEnv(gym.Env):
+    """All pursuers as one agent: ``MultiDiscrete([A] * N)`` actions, the team reward."""
+
+    metadata = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
+
+    def __init__(
+        self,
+        scenario: str | Path | Scenario = "grid",
+        render_mode: str | None = None,
+        **overrides: Any,
+    ) -> None:
+        self.scenario = load_scenario(scenario, overrides)
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
+        self.render_mode = render_mode
+        self.game = Game(self.scenario)
+        self.observation_space = observation_space(self.scenario)
+        self.action_space = gym.spaces.MultiDiscrete([self.scenario.actions] * self.scenario.pursuers)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode (``options={"positions": …}`` places agents)."""
+        super().reset(seed=seed)
+        episode_seed = self.game.reset(seed, options)
+        return self.game.observation(), {**self.game.info(), "episode_seed": episode_seed}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Apply the joint action; returns the team reward."""
+        out = self.game.step(np.asarray(action))
+        return (
+            self.game.observation(),
+            float(out.reward[0]),
+            bool(out.terminated[0]),
+            bool(out.truncated[0]),
+            self.game.info(),
+        )
+
+    def render(self) -> str | np.ndarray | None:
+        """A text picture (``ansi``) or an RGB array (``rgb_array``) of the arena."""
+        return self.game.render(self.render_mode)

@@ -1,0 +1,128 @@
+"""``make_env``: the PettingZoo-style parallel API over either core (SPEC §8).
+
+Dicts keyed by agent in, dicts keyed by agent out; the rules live in the core. The class
+follows PettingZoo's ``ParallelEnv`` protocol without importing PettingZoo, which is only
+needed to run its conformance tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from ..config import Scenario, load_scenario
+from .game import Game
+
+
+def observation_space(scenario: Scenario) -> spaces.Box:
+    """The global observation space: positions in [0, 1], physics velocities unbounded."""
+    n = scenario.pursuers + 1
+    low = np.zeros(scenario.obs_dim, dtype=np.float32)
+    high = np.ones(scenario.obs_dim, dtype=np.float32)
+    if scenario.mode == "physics":
+        low[2 * n :], high[2 * n :] = -np.inf, np.inf
+    return spaces.Box(low, high, dtype=np.float32)
+
+
+class PursuitParallelEnv:
+    """The pursuit game for N pursuers, PettingZoo parallel style; the evader is scripted.
+
+    Every pursuer observes the global state and receives the team reward. ``infos[agent]``
+    carries ``captured``, ``collisions``, ``wall_contacts``, ``evader_action``, ``t`` and,
+    in physics mode, ``events`` (the contact events that began in this step).
+    """
+
+    metadata = {
+        "name": "a2cm_pursuit_v0",
+        "render_modes": ["ansi", "rgb_array"],
+        "is_parallelizable": True,
+    }
+
+    def __init__(self, scenario: Scenario, render_mode: str | None = "ansi") -> None:
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
+        self.scenario = scenario
+        self.render_mode = render_mode
+        self.game = Game(scenario)
+        self.possible_agents = list(scenario.agents)
+        self.agents: list[str] = []
+        self._observation_space = observation_space(scenario)
+        self._action_space = spaces.Discrete(scenario.actions)
+        self.state_space = self._observation_space
+        self.episode_seed: int | None = None
+
+    def observation_space(self, agent: str) -> spaces.Box:
+        """Every pursuer observes the global state vector."""
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Discrete:
+        """``Discrete(4)`` (up, down, left, right) or ``Discrete(5)`` with stay."""
+        return self._action_space
+
+    def reset(
+        self, seed: int | None = None, options: Mapping[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
+        """Start an episode; ``options={"positions": {agent: (x, y)}}`` places agents."""
+        self.episode_seed = self.game.reset(seed, options)
+        self.agents = list(self.possible_agents)
+        obs = self.game.observation()
+        info = self.game.info()
+        return {a: obs for a in self.agents}, {a: dict(info) for a in self.agents}
+
+    def step(self, actions: Mapping[str, int]) -> tuple[dict, dict, dict, dict, dict]:
+        """Move every pursuer (one action each) and the evader; see the class docstring."""
+        if not self.agents:
+            raise RuntimeError("step() called on a finished episode: call reset() first")
+        missing = [a for a in self.agents if a not in actions]
+        unknown = [a for a in actions if a not in self.agents]
+        if missing or unknown:
+            raise ValueError(f"actions: missing {missing}, unknown {unknown}")
+        joint = []
+        for agent in self.agents:
+            value = actions[agent]
+            if not isinstance(value, (int, np.integer)) or isinstance(value, bool):
+                raise ValueError(f"invalid action {value!r} for {agent}: expected an integer")
+            joint.append(int(value))
+        out = self.game.step(np.array(joint, dtype=np.int64))
+        obs = self.game.observation()
+        info = self.game.info()
+        reward = float(out.reward[0])
+        terminated, truncated = bool(out.terminated[0]), bool(out.truncated[0])
+        agents = self.agents
+        if terminated or truncated:
+            self.agents = []
+        return (
+            {a: obs for a in agents},
+            {a: reward for a in agents},
+            {a: terminated for a in agents},
+            {a: truncated for a in agents},
+            {a: dict(info) for a in agents},
+        )
+
+    def state(self) -> np.ndarray:
+        """The global state: the same vector every pursuer observes."""
+        return self.game.observation()
+
+    def render(self) -> str | np.ndarray | None:
+        """A text picture (``ansi``) or an RGB array (``rgb_array``) of the arena."""
+        return self.game.render(self.render_mode)
+
+    def close(self) -> None:
+        """Release the simulation (nothing to do for either core)."""
+
+    @property
+    def unwrapped(self) -> PursuitParallelEnv:
+        """The environment itself (there are no wrappers)."""
+        return self
+
+
+def make_env(
+    scenario: str | Path | Scenario = "grid", render_mode: str | None = "ansi", **overrides: Any
+) -> PursuitParallelEnv:
+    """The parallel env of a named or file scenario; keyword overrides are validated like the
+    file (``make_env("grid", max_steps=50, **{"rewards.step": -2})``)."""
+    return PursuitParallelEnv(load_scenario(scenario, overrides), render_mode=render_mode)

@@ -1,0 +1,138 @@
+"""The batched environment the trainer steps: ``num_envs`` games with auto-reset.
+
+A finished game is restarted within the same ``step`` call; the step still reports the
+finished episode's final observation (``final_obs``, for the truncation bootstrap) and an
+:class:`EpisodeSummary`. Episode seeds come from one generator seeded at ``reset(seed)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import Scenario
+from .core import StepOutcome, check_actions
+from .factory import make_core
+
+
+@dataclass(frozen=True)
+class EpisodeSummary:
+    """One finished episode of a vector env."""
+
+    env: int
+    seed: int
+    length: int
+    ret: float
+    captured: bool
+    truncated: bool
+    collision_terminated: bool
+    collisions: int
+    wall_contacts: int
+
+
+@dataclass
+class VecStep:
+    """The result of one vector step (arrays over the ``B`` games).
+
+    ``obs`` are the observations to act on next (new episodes already started where one
+    ended); ``final_obs`` equals ``obs`` except in rows that finished, where it holds the
+    last observation of the finished episode. ``positions`` (and ``velocities`` in physics
+    mode) are the agents' positions at the end of this step, before any auto-reset.
+    """
+
+    obs: np.ndarray
+    reward: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    final_obs: np.ndarray
+    outcome: StepOutcome
+    positions: np.ndarray
+    velocities: np.ndarray | None
+    episodes: list[EpisodeSummary]
+
+
+class VectorEnv:
+    """``num_envs`` games of one scenario stepped together, restarted automatically."""
+
+    def __init__(self, scenario: Scenario, num_envs: int = 1, workers: int = 1) -> None:
+        self.scenario = scenario
+        self.num_envs = num_envs
+        self.n_agents = scenario.pursuers
+        self.n_actions = scenario.actions
+        self.obs_dim = scenario.obs_dim
+        self.core = make_core(scenario, num_envs, workers)
+        self._seeds = np.random.default_rng(0)
+        self._return = np.zeros(num_envs)
+        self._collisions = np.zeros(num_envs, dtype=np.int64)
+        self._walls = np.zeros(num_envs, dtype=np.int64)
+
+    def reset(self, seed: int) -> np.ndarray:
+        """Seed the episode-seed generator, start every game, return the observations."""
+        self._seeds = np.random.default_rng(seed)
+        envs = np.arange(self.num_envs)
+        self._start(envs)
+        return self.core.observe()
+
+    def _start(self, envs: np.ndarray) -> None:
+        seeds = self._seeds.integers(0, 2**63, size=len(envs)).astype(np.uint64)
+        self.core.reset(envs, seeds)
+        self._return[envs] = 0.0
+        self._collisions[envs] = 0
+        self._walls[envs] = 0
+
+    def episode_seeds(self) -> np.ndarray:
+        """The episode seed of the episode running in each game."""
+        return self.core.episode_seed.copy()
+
+    def step(self, actions: np.ndarray, validate: bool = True) -> VecStep:
+        """Step every game with pursuer ``actions`` ``(B, N)``; restart finished games."""
+        if validate:
+            check_actions(actions, self.n_actions, self.scenario.agents)
+        core = self.core
+        seeds, lengths = core.episode_seed.copy(), core.t + 1
+        out = core.step(actions)
+        self._return += out.reward
+        self._collisions += out.collisions
+        self._walls += out.wall_contacts
+        obs = core.observe()
+        positions, velocities = core.positions(), core.velocities()
+        done = out.terminated | out.truncated
+        episodes: list[EpisodeSummary] = []
+        final_obs = obs
+        if done.any():
+            envs = np.flatnonzero(done)
+            episodes = [
+                EpisodeSummary(
+                    env=int(i),
+                    seed=int(seeds[i]),
+                    length=int(lengths[i]),
+                    ret=float(self._return[i]),
+                    captured=bool(out.captured[i]),
+                    truncated=bool(out.truncated[i]),
+                    collision_terminated=bool(out.terminated[i] and not out.captured[i]),
+                    collisions=int(self._collisions[i]),
+                    wall_contacts=int(self._walls[i]),
+                )
+                for i in envs
+            ]
+            final_obs = obs.copy()
+            self._start(envs)
+            obs[envs] = core.observe()[envs]
+        return VecStep(
+            obs=obs,
+            reward=out.reward,
+            terminated=out.terminated,
+            truncated=out.truncated,
+            final_obs=final_obs,
+            outcome=out,
+            positions=positions,
+            velocities=velocities,
+            episodes=episodes,
+        )
+
+    def close(self) -> None:
+        """Stop worker processes, if any."""
+        close = getattr(self.core, "close", None)
+        if close is not None:
+            close()
