@@ -1,0 +1,106 @@
+"""Scenario files and overrides: loading, validation, clear errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+
+import pytest
+
+from a2cm_phys import make_env
+from a2cm_phys.config import (
+    ConfigError,
+    load_scenario,
+    load_train,
+    parse_assignments,
+    scenario_names,
+)
+
+
+def test_named_scenarios_load_and_mean_what_they_say():
+    assert {"grid", "grid_collision", "grid_collision_continue", "grid_flee"} <= set(scenario_names())
+    exp2 = load_scenario("grid_collision")
+    assert (exp2.rewards.step, exp2.rewards.collision, exp2.collisions.mode) == (
+        -1000.0, -150_000_000.0, "terminate",
+    )
+    assert load_scenario("grid_collision_continue").collisions.mode == "penalize"
+    assert load_scenario("grid").collisions.mode == "off"
+    assert load_scenario("grid_flee").evader == "flee"
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        exp2.size = 7
+
+
+def test_a_scenario_can_be_a_path(tmp_path):
+    path = tmp_path / "mine.toml"
+    path.write_text('size = 3\npursuers = 2\n[rewards]\nstep = -2\n')
+    sc = load_scenario(path)
+    assert (sc.name, sc.size, sc.pursuers, sc.rewards.step) == ("mine", 3, 2, -2.0)
+
+
+@pytest.mark.parametrize(
+    ("overrides", "key", "why"),
+    [
+        ({"size": 1}, "size", ">= 2"),
+        ({"pursuers": 17}, "pursuers", "border"),
+        ({"max_steps": 0}, "max_steps", ">= 1"),
+        ({"evader": "smart"}, "evader", "one of"),
+        ({"collisions.mode": "sometimes"}, "collisions.mode", "one of"),
+        ({"rewards.step": "minus one"}, "rewards.step", "number"),
+        ({"size": 5.5}, "size", "integer"),
+        ({"size": True}, "size", "integer"),
+        ({"colour": "red"}, "colour", "unknown key"),
+        ({"rewards.bonus": 1}, "rewards.bonus", "unknown key"),
+        ({"physics.substeps": 0}, "physics.substeps", ">= 1"),
+        ({"actions": 6}, "actions", "4 \\(paper\\) or 5"),
+    ],
+)
+def test_bad_values_name_the_key(overrides, key, why):
+    with pytest.raises(ConfigError, match=rf"key '{key}': .*{why}"):
+        load_scenario("grid", overrides)
+
+
+def test_bad_file_names_file_and_key(tmp_path):
+    path = tmp_path / "broken.toml"
+    path.write_text('size = 5\n[rewards]\nstpe = -1\n')
+    with pytest.raises(ConfigError, match=r"broken\.toml: key 'rewards\.stpe': unknown key"):
+        load_scenario(path)
+    path.write_text("size = = 5\n")
+    with pytest.raises(ConfigError, match=r"broken\.toml: invalid TOML"):
+        load_scenario(path)
+
+
+def test_unknown_scenario_lists_the_named_ones():
+    with pytest.raises(ConfigError, match="unknown scenario 'gird'.*grid_collision"):
+        load_scenario("gird")
+
+
+def test_overrides_from_code_and_command_line_agree():
+    from_cli = load_scenario("grid", parse_assignments(["rewards.step=-2", "evader=flee", "size=6"]))
+    from_code = make_env("grid", size=6, evader="flee", rewards={"step": -2}).scenario
+    assert from_cli == from_code
+    assert from_cli.rewards.collision == 0.0  # the rest of the table is kept
+
+
+def test_set_needs_key_equals_value():
+    with pytest.raises(ConfigError, match="key=value"):
+        parse_assignments(["size"])
+
+
+def test_training_options_are_validated():
+    with pytest.raises(ConfigError, match="batch_size"):
+        load_train({"batch_size": 100, "num_envs": 16})
+    with pytest.raises(ConfigError, match="'lr'"):
+        load_train({"lr": -1.0})
+    assert load_train().lr == 7e-3
+
+
+def test_cli_config_error_is_one_line_without_traceback():
+    proc = subprocess.run(
+        [sys.executable, "-m", "a2cm_phys.train", "--scenario", "grid", "--set", "size=1",
+         "--updates", "1"],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    assert "key 'size'" in proc.stderr
