@@ -14,6 +14,7 @@ and turns one rollout batch into one gradient step:
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
@@ -141,11 +142,20 @@ class Learner:
         return metrics
 
     def state_dict(self) -> dict[str, Any]:
-        """Model and optimiser state, for a bit-exact resume."""
-        return {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict()}
+        """Model and optimiser state, for a bit-exact resume.
+
+        A deep copy: torch's own state dicts alias the live tensors, so an in-memory "last
+        good checkpoint" would otherwise change with every later update.
+        """
+        return copy.deepcopy(
+            {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict()}
+        )
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
-        """Restore what :meth:`state_dict` returned (model weights and RMSprop averages)."""
+        """Restore what :meth:`state_dict` returned (model weights and RMSprop averages).
+
+        ``state`` is copied, never aliased, so it can be loaded again later.
+        """
         self.model.load_state_dict(state["model"])
-        self.optimizer.load_state_dict(state["optimizer"])
+        self.optimizer.load_state_dict(copy.deepcopy(state["optimizer"]))
         self.model.refresh_snapshot()

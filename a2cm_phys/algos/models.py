@@ -109,6 +109,7 @@ class ActorCritic(nn.Module):
         self.critic_out = StackedLinear(c, hidden, 1, generator)
         self._snapshot: tuple[np.ndarray, ...] | None = None
         self._snapshot_key: tuple[int, ...] | None = None
+        self._cache_actor_params()
 
     @property
     def n_critics(self) -> int:
@@ -140,8 +141,8 @@ class ActorCritic(nn.Module):
 
         Args:
             obs: ``(B, obs_dim)`` or ``(obs_dim,)`` observations (any float dtype).
-            rng: the only source of sampling randomness; draws ``B·N`` uniforms per call
-                (none when ``greedy``), so a seeded generator gives a bit-exact run.
+            rng: the only source of sampling randomness; draws ``B·N·A`` Gumbel variates per
+                call (none when ``greedy``), so a seeded generator gives a bit-exact run.
             greedy: take the most probable action instead of sampling.
             backend: ``"numpy"`` (default, a cached float32 copy of the actor weights) or
                 ``"torch"`` (``inference_mode`` forward); both sample identically.
@@ -151,7 +152,7 @@ class ActorCritic(nn.Module):
         """
         logits = self.logits_np(obs, backend)
         if greedy:
-            return logits.argmax(-1)
+            return logits.argmax(-1).astype(np.int64, copy=False)
         return sample_categorical(logits, rng)
 
     def logits_np(self, obs: np.ndarray, backend: Backend = "numpy") -> np.ndarray:
@@ -191,15 +192,24 @@ class ActorCritic(nn.Module):
 
     def _actor_versions(self) -> tuple[int, ...]:
         # In-place updates (optimiser steps, load_state_dict, no_grad copies) bump the
-        # version counter of a parameter, so a changed key means a stale snapshot.
-        return (
-            self.actor_hidden.weight._version,
-            self.actor_hidden.bias._version,
-            self.actor_out.weight._version,
-            self.actor_out.bias._version,
-            id(self.actor_hidden.weight),
-            id(self.actor_out.weight),
+        # version counter of a parameter, so a changed key means a stale snapshot. The
+        # parameters are cached in a plain tuple: nn.Module attribute lookup costs ~1 µs each.
+        return tuple(p._version for p in self._actor_params)
+
+    def _apply(self, fn, *args, **kwargs):  # type: ignore[override]
+        """Invalidate the numpy snapshot when parameters are moved or converted (``.to``)."""
+        out = super()._apply(fn, *args, **kwargs)
+        self._cache_actor_params()
+        return out
+
+    def _cache_actor_params(self) -> None:
+        self._actor_params = (
+            self.actor_hidden.weight,
+            self.actor_hidden.bias,
+            self.actor_out.weight,
+            self.actor_out.bias,
         )
+        self._snapshot = None
 
     def _numpy_snapshot(self) -> tuple[np.ndarray, ...]:
         if self._snapshot is None or self._snapshot_key != self._actor_versions():
@@ -209,16 +219,13 @@ class ActorCritic(nn.Module):
 
 
 def sample_categorical(logits: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Sample one index per row of ``logits (..., A)`` by inverse CDF with ``rng.random``.
+    """Sample one index per row of ``logits (..., A)`` from ``softmax(logits)`` (Gumbel-max).
 
-    Draws exactly ``prod(logits.shape[:-1])`` uniforms; zero-probability actions are never
-    picked. Returns int64 indices of shape ``logits.shape[:-1]``, always ``< A``.
+    ``argmax(logits + Gumbel noise)`` is an exact softmax sample, stable for any logit scale;
+    actions with logit ``-inf`` (probability 0) are never picked. Draws exactly
+    ``logits.size`` Gumbel variates from ``rng``. Returns int64 of shape ``logits.shape[:-1]``.
     """
-    e = np.exp(logits - logits.max(-1, keepdims=True))
-    cdf = np.cumsum(e, -1)
-    u = rng.random(logits.shape[:-1])
-    u *= cdf[..., -1]
-    return (cdf[..., :-1] <= u[..., None]).sum(-1, dtype=np.int64)
+    return (logits + rng.gumbel(size=logits.shape)).argmax(-1).astype(np.int64, copy=False)
 
 
 def make_model(

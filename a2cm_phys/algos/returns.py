@@ -64,6 +64,7 @@ def discounted_returns(
         np.broadcast_to(step, shape).reshape(n_steps, -1).T.tolist(),
         np.broadcast_to(carry, shape).reshape(n_steps, -1).T.tolist(),
         np.broadcast_to(boot, shape[1:]).reshape(-1).tolist(),
+        strict=True,
     )
     out = []
     for step_col, carry_col, g in cols:
