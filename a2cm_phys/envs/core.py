@@ -46,6 +46,41 @@ class StepOutcome:
     events: list[list[tuple[str, str, str, int]]] | None = None
 
 
+def settle(
+    scenario: Scenario,
+    t: np.ndarray,
+    captured: np.ndarray,
+    collisions: np.ndarray,
+    wall_contacts: np.ndarray,
+    evader_action: np.ndarray,
+    events: list[list[tuple[str, str, str, int]]] | None = None,
+) -> StepOutcome:
+    """Team reward, termination and truncation from a step's counts (SPEC §4), both modes.
+
+    ``t`` is the step counter after the step. In ``off`` mode collisions are counted but
+    neither penalised nor terminal; in ``terminate`` mode any collision ends the episode.
+    """
+    rw, mode = scenario.rewards, scenario.collisions.mode
+    reward = np.full(len(t), rw.step)
+    if mode != "off" and rw.collision:
+        reward += rw.collision * collisions
+    if rw.capture:
+        reward += rw.capture * captured
+    if rw.wall:
+        reward += rw.wall * wall_contacts
+    terminated = captured | (collisions > 0) if mode == "terminate" else captured
+    return StepOutcome(
+        reward=reward,
+        terminated=terminated,
+        truncated=(t >= scenario.max_steps) & ~terminated,
+        captured=captured,
+        collisions=collisions,
+        wall_contacts=wall_contacts,
+        evader_action=evader_action,
+        events=events,
+    )
+
+
 class Core(Protocol):
     """A batch of ``num_envs`` games of one scenario; see the module docstring."""
 

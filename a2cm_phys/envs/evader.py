@@ -32,15 +32,14 @@ def mix64(x: np.ndarray) -> np.ndarray:
 
 def draw(seed: np.ndarray, t: np.ndarray) -> np.ndarray:
     """One uniform uint64 per game for step ``t``: SplitMix64's ``t``-th output from ``seed``."""
-    with np.errstate(over="ignore"):
-        return mix64(seed + (t.astype(np.uint64) + np.uint64(1)) * _GOLDEN)
+    # uint64 array arithmetic wraps modulo 2**64 (numpy warns only for scalars)
+    return mix64(seed + (t.astype(np.uint64) + np.uint64(1)) * _GOLDEN)
 
 
 def draws(seed: np.ndarray, t: np.ndarray, streams: int) -> np.ndarray:
     """``(B, streams)`` independent uniform uint64 draws for step ``t``."""
     lanes = np.arange(1, streams + 1, dtype=np.uint64) * _GOLDEN
-    with np.errstate(over="ignore"):
-        return mix64(draw(seed, t)[:, None] + lanes)
+    return mix64(draw(seed, t)[:, None] + lanes)
 
 
 def random_actions(seed: np.ndarray, t: np.ndarray, n_actions: int) -> np.ndarray:

@@ -44,15 +44,17 @@ class Game:
         self.last = None
         return episode_seed
 
-    def step(self, joint_action: np.ndarray) -> StepOutcome:
-        """Advance the game with the pursuers' actions ``(N,)``; raises on invalid actions."""
+    def step(self, joint_action: np.ndarray, checked: bool = False) -> StepOutcome:
+        """Advance the game with the pursuers' actions ``(N,)``; raises on invalid actions
+        unless the caller has ``checked`` them already."""
         actions = np.asarray(joint_action).reshape(1, -1)
-        if actions.shape[1] != len(self.names) or not np.issubdtype(actions.dtype, np.integer):
-            raise ValueError(
-                f"expected {len(self.names)} integer actions (one per pursuer), got {joint_action!r}"
-            )
-        check_actions(actions, self.scenario.actions, self.names)
-        self.last = self.core.step(actions.astype(np.int64))
+        if not checked:
+            if actions.shape[1] != len(self.names) or not np.issubdtype(actions.dtype, np.integer):
+                raise ValueError(
+                    f"expected {len(self.names)} integer actions (one per pursuer), got {joint_action!r}"
+                )
+            check_actions(actions, self.scenario.actions, self.names)
+        self.last = self.core.step(actions)
         return self.last
 
     def observation(self) -> np.ndarray:

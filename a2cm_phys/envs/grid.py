@@ -13,30 +13,65 @@ from itertools import combinations
 import numpy as np
 
 from ..config import Scenario
-from .core import ACTION_DELTAS, StepOutcome, agent_names, default_start, parse_positions
+from .core import (
+    ACTION_DELTAS,
+    StepOutcome,
+    agent_names,
+    default_start,
+    parse_positions,
+    settle,
+)
 from .evader import evader_actions
 
 
-class GridRules:
-    """Static tables of one arena (moves, wall bumps, coordinates) and the move rule itself.
+def meet(old_a: np.ndarray, new_a: np.ndarray, old_b: np.ndarray, new_b: np.ndarray) -> np.ndarray:
+    """The one contact rule of the grid: two movers end on one cell, or swap cells.
 
-    Arrays are *agent-major*: ``cells`` is ``(N + 1, B)``, one contiguous row per agent
-    (pursuers, then the evader), which keeps every comparison a fast 1-D operation.
+    A pursuer meeting the evader is a capture; two pursuers meeting is a collision.
     """
+    return (new_a == new_b) | ((new_a == old_b) & (old_a == new_b))
+
+
+class GridRules:
+    """Static tables of one arena and the move rule itself.
+
+    A *move index* is ``cell * 5 + action`` (action 4 = stay). Tables indexed by it give the
+    next cell and whether the move bumps into the border; ``meets[i, j]`` tabulates
+    :func:`meet` for every pair of moves, so a step is a handful of lookups. Arrays are
+    *agent-major*: ``cells`` is ``(N + 1, B)``, one contiguous row per agent (pursuers,
+    then the evader).
+    """
+
+    MEET_TABLE_LIMIT = 3000
+    """Largest number of move indices (``size² · 5``) for which ``meets`` is tabulated."""
 
     def __init__(self, scenario: Scenario) -> None:
         size, n = scenario.size, scenario.pursuers
         self.size, self.pursuers = size, n
         xy = np.stack(np.meshgrid(np.arange(size), np.arange(size), indexing="xy"), -1)
         self.cell_xy = xy.reshape(-1, 2).astype(np.int64)  # cell -> (x, y)
-        target = self.cell_xy[:, None, :] + ACTION_DELTAS[None]  # (C, 5, 2); column 4 = stay
+        target = self.cell_xy[:, None, :] + ACTION_DELTAS[None]  # (C, 5, 2)
         inside = np.all((target >= 0) & (target < size), axis=-1)
         target = np.where(inside[..., None], target, self.cell_xy[:, None, :])
-        # Flat tables indexed by cell * 5 + action.
         self.move = (target[..., 0] + size * target[..., 1]).astype(np.int32).ravel()
         self.blocked = (~inside).astype(np.int32).ravel()
         self.cell_obs = (self.cell_xy / (size - 1)).astype(np.float32)
-        self.pairs = list(combinations(range(n), 2))
+        # Rows of the move-index array compared in a step: pursuer pairs, then each
+        # pursuer with the evader (row n).
+        pairs = list(combinations(range(n), 2)) + [(i, n) for i in range(n)]
+        self.n_pairs = len(pairs) - n
+        self.left, self.right = (np.array(side, dtype=np.int64) for side in zip(*pairs, strict=True))
+        moves = len(self.move)
+        self.meets: np.ndarray | None = None
+        if moves <= self.MEET_TABLE_LIMIT:
+            old = np.arange(moves) // 5
+            self.meets = meet(old[:, None], self.move[:, None], old[None], self.move[None])
+
+    def _meet(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """:func:`meet` for move indices ``a`` and ``b`` (broadcast), tabulated if small."""
+        if self.meets is not None:
+            return self.meets[a, b]
+        return meet(a // 5, self.move[a], b // 5, self.move[b])
 
     def apply(
         self, cells: np.ndarray, pursuer_actions: np.ndarray, evader_action: np.ndarray
@@ -44,24 +79,18 @@ class GridRules:
         """One simultaneous move of every agent: ``(new_cells, captured, collisions, walls)``.
 
         ``cells`` is ``(N + 1, B)``, ``pursuer_actions`` ``(B, N)``, ``evader_action`` ``(B,)``.
-        Capture: a pursuer ends on the evader's cell or swaps cells with it. Collision: each
-        pursuer pair that ends on one cell or swaps cells counts once. Walls: pursuer moves
-        blocked by the border.
+        Capture: a pursuer meets the evader. Collision: each pursuer pair that meets counts
+        once. Walls: pursuer moves blocked by the border.
         """
         n = self.pursuers
         index = cells * 5
         index[:n] += pursuer_actions.T
         index[n] += evader_action
-        new = self.move[index]
-        walls = self.blocked[index[:n]].sum(axis=0)
-        old_e, new_e = cells[n], new[n]
-        captured = np.zeros(cells.shape[1], dtype=bool)
-        for i in range(n):
-            captured |= (new[i] == new_e) | ((new[i] == old_e) & (cells[i] == new_e))
-        collisions = np.zeros(cells.shape[1], dtype=np.int64)
-        for i, j in self.pairs:
-            collisions += (new[i] == new[j]) | ((new[i] == cells[j]) & (cells[i] == new[j]))
-        return new, captured, collisions, walls
+        met = self._meet(index[self.left], index[self.right])
+        collisions = np.add.reduce(met[: self.n_pairs], axis=0, dtype=np.int64)
+        captured = np.logical_or.reduce(met[self.n_pairs :], axis=0)
+        walls = np.add.reduce(self.blocked[index[:n]], axis=0, dtype=np.int64)
+        return self.move[index], captured, collisions, walls
 
 
 class GridCore:
@@ -78,9 +107,6 @@ class GridCore:
         self.cells = np.repeat(self._start[:, None], num_envs, axis=1)  # (N + 1, B)
         self.t = np.zeros(num_envs, dtype=np.int64)
         self.episode_seed = np.zeros(num_envs, dtype=np.uint64)
-        mode = scenario.collisions.mode
-        self._collision_reward = scenario.rewards.collision if mode != "off" else 0.0
-        self._collision_ends = mode == "terminate"
 
     def reset(
         self,
@@ -119,21 +145,7 @@ class GridCore:
         )
         self.cells, captured, collisions, walls = self.rules.apply(self.cells, actions, evader)
         self.t += 1
-        rw = sc.rewards
-        reward = rw.step + self._collision_reward * collisions + rw.capture * captured
-        if rw.wall:
-            reward = reward + rw.wall * walls
-        terminated = captured | (self._collision_ends & (collisions > 0))
-        truncated = (self.t >= sc.max_steps) & ~terminated
-        return StepOutcome(
-            reward=reward,
-            terminated=terminated,
-            truncated=truncated,
-            captured=captured,
-            collisions=collisions,
-            wall_contacts=walls,
-            evader_action=evader,
-        )
+        return settle(sc, self.t, captured, collisions, walls, evader)
 
     def observe(self) -> np.ndarray:
         """Global observations ``(B, 2 (N + 1))``: all ``(x, y)`` divided by ``size − 1``."""

@@ -77,17 +77,22 @@ class PursuitParallelEnv:
         """Move every pursuer (one action each) and the evader; see the class docstring."""
         if not self.agents:
             raise RuntimeError("step() called on a finished episode: call reset() first")
-        missing = [a for a in self.agents if a not in actions]
-        unknown = [a for a in actions if a not in self.agents]
-        if missing or unknown:
+        if len(actions) != len(self.agents) or any(a not in actions for a in self.agents):
+            missing = [a for a in self.agents if a not in actions]
+            unknown = [a for a in actions if a not in self.agents]
             raise ValueError(f"actions: missing {missing}, unknown {unknown}")
-        joint = []
-        for agent in self.agents:
-            value = actions[agent]
-            if not isinstance(value, (int, np.integer)) or isinstance(value, bool):
-                raise ValueError(f"invalid action {value!r} for {agent}: expected an integer")
-            joint.append(int(value))
-        out = self.game.step(np.array(joint, dtype=np.int64))
+        n_actions = self.scenario.actions
+        joint = [actions[a] for a in self.agents]
+        for agent, value in zip(self.agents, joint, strict=True):
+            if (
+                not isinstance(value, (int, np.integer))
+                or isinstance(value, bool)
+                or not 0 <= value < n_actions
+            ):
+                raise ValueError(
+                    f"invalid action {value!r} for {agent}: expected an integer in [0, {n_actions})"
+                )
+        out = self.game.step(np.array(joint, dtype=np.int64), checked=True)
         obs = self.game.observation()
         info = self.game.info()
         reward = float(out.reward[0])
