@@ -67,3 +67,21 @@ def test_batched_core_equals_single_games(game):
         live &= ~(out.terminated | out.truncated)
         if not live.any():
             break
+
+
+@settings(max_examples=40, deadline=None)
+@given(games())
+def test_tabulated_meet_rule_equals_the_direct_rule(game):
+    """Large arenas skip the meet table; both paths must give the same step."""
+    sc, batch, actions, seed = game
+    tabulated = GridCore(sc, batch).rules
+    direct = GridCore(sc, batch).rules
+    direct.meets = None
+    rng = np.random.default_rng(seed)
+    for acts in actions:
+        cells = rng.integers(0, sc.size**2, (sc.pursuers + 1, batch)).astype(np.int32)
+        evader = rng.integers(0, 5, batch)
+        a = tabulated.apply(cells.copy(), acts, evader)
+        b = direct.apply(cells.copy(), acts, evader)
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)

@@ -1,0 +1,312 @@
+"""The grid game as a factorised Markov decision process over the joint state.
+
+A joint state is every pursuer's cell and the evader's cell; its index is
+``((p_0 · C + p_1) · C + …) · C + e`` with ``C = size²`` (``p_0`` most significant), so an
+array over states reshapes to ``(C,) * (N + 1)``. A joint action index is likewise
+``(a_0 · A + a_1) · A + …``.
+
+One step factorises per agent: pursuer ``i`` moves by its own table, and whether it catches
+the evader depends only on its own cell and action and the evader's cell and move. So the
+expected next value ``Σ_b P(b | s) · [no capture] · U(s')`` over all states and joint actions
+is a chain of ``np.take`` calls, one per agent, each multiplied by that agent's
+no-capture factor; the full ``(states × joint actions)`` tensor is only built one slice of
+``p_0`` at a time. All tables come from :class:`~a2cm_phys.envs.grid.GridRules`: its move
+table, and its :meth:`~a2cm_phys.envs.grid.GridRules.apply` run on every one-pursuer
+(capture) and two-pursuer (collision) configuration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator
+
+import numpy as np
+
+from ..config import Scenario
+from ..envs.evader import STAY
+from ..envs.grid import GridRules
+
+MAX_STATES = 20_000_000
+"""Largest joint state space the solver attempts."""
+
+MEMORY_BUDGET = 3 * 2**30
+"""Largest estimated peak memory (bytes) the solver attempts."""
+
+CHUNK_BYTES = 32 * 2**20
+"""Target size of one slice of the ``states × joint actions`` tensor."""
+
+
+class UnsupportedError(ValueError):
+    """The scenario is not a game this solver handles (physics mode, ill-posed rewards)."""
+
+
+class TooLargeError(ValueError):
+    """The joint state space is too large to solve exactly within the limits."""
+
+
+def check_supported(scenario: Scenario) -> None:
+    """Raise :class:`UnsupportedError` unless the scenario is a well-posed grid game.
+
+    The objective is the expected total raw reward until termination (no discount), which
+    is finite and attained by a stationary policy only if every step costs something.
+    """
+    if scenario.mode != "grid":
+        raise UnsupportedError(f"the oracle solves grid mode only, got mode={scenario.mode!r}")
+    rw = scenario.rewards
+    if rw.step + scenario.pursuers * max(rw.wall, 0.0) >= 0:
+        raise UnsupportedError(
+            "the oracle minimises expected cost until termination and needs every step to "
+            f"cost: rewards.step + pursuers * max(rewards.wall, 0) < 0 (step={rw.step:g})"
+        )
+    if scenario.collisions.mode == "penalize" and rw.collision > 0:
+        raise UnsupportedError("rewards.collision > 0 with collisions.mode='penalize' is unbounded")
+
+
+class GridModel:
+    """Per-agent transition and reward tables of one grid scenario, and the Bellman backup.
+
+    Raises :class:`UnsupportedError` for scenarios it cannot solve and
+    :class:`TooLargeError` when :meth:`memory_estimate` exceeds ``memory_budget`` or the
+    state count exceeds ``max_states``.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        memory_budget: float = MEMORY_BUDGET,
+        max_states: int = MAX_STATES,
+    ) -> None:
+        check_supported(scenario)
+        self.scenario = scenario
+        self.rules = GridRules(scenario)
+        self.n = n = scenario.pursuers
+        self.n_actions = a = scenario.actions
+        self.n_cells = c = scenario.size**2
+        self.n_states = c ** (n + 1)
+        self.n_joint = a**n
+        self.shape = (c,) * (n + 1)
+        self.evader_moves = np.arange(a) if scenario.evader != "static" else np.array([STAY])
+        self.terminate = scenario.collisions.mode == "terminate"
+        rw = scenario.rewards
+        self.collision_reward = rw.collision if scenario.collisions.mode != "off" else 0.0
+        self.action_axes = tuple(range(1, 2 * n, 2))
+        per_p0 = self.n_states // c * self.n_joint
+        self.chunk = max(1, min(c, CHUNK_BYTES // (8 * per_p0)))
+        need = self.memory_estimate()
+        if self.n_states > max_states or need > memory_budget:
+            raise TooLargeError(
+                f"{scenario.size}x{scenario.size} arena with {n} pursuers is too large to solve "
+                f"exactly: {self.n_states:,} joint states x {self.n_joint:,} joint actions "
+                f"need ~{need / 2**30:.1f} GiB (limits: {max_states:,} states, "
+                f"{memory_budget / 2**30:.1f} GiB)"
+            )
+        move = self.rules.move.reshape(c, 5).astype(np.intp)
+        self.pmove = move[:, :a]  # (C, A): pursuer cell, action -> next cell
+        self.emove = move[:, self.evader_moves]  # (C, nb): evader cell, move -> next cell
+        self.free = self._free_table()
+        self.walls = self.rules.blocked.reshape(c, 5)[:, :a].astype(np.float64)
+        self.pair_collide = self._pair_table()
+        self.weights = self._evader_weights()
+        # Built on first use: loading a cached solution only needs the tables above.
+        self._nocoll: list[np.ndarray] | None = None
+        self._reward: list[np.ndarray] | None = None
+
+    # ------------------------------------------------------------------ sizes and states
+
+    @property
+    def n_moves(self) -> int:
+        """Number of evader moves with a probability (``actions``, or 1 for ``static``)."""
+        return len(self.evader_moves)
+
+    def memory_estimate(self) -> float:
+        """Estimated peak bytes of a solve (value arrays, backup slices, policy replay)."""
+        s, nb, n = self.n_states, len(self.evader_moves), self.n
+        state_arrays = s * 8 * 8 + (s * nb * 8 if self.scenario.evader == "flee" else 0)
+        chain = nb * s * self.n_actions ** (n - 1) * 8  # one pre-reduced tensor per evader move
+        slices = 4 * self.chunk * (s // self.n_cells) * self.n_joint * 8
+        full = s * self.n_joint
+        extra = full * (8 if self._reward_is_array() else 0) + full * self.terminate
+        extra += full * (self.scenario.evader == "flee")  # safe-action mask
+        replay = s * nb * (8 + 8 + 4 * (n + 1) * 2)
+        return float(state_arrays + chain + slices + extra + replay)
+
+    def decode(self, index: np.ndarray) -> np.ndarray:
+        """Cells ``(N + 1, K)`` (pursuers, then the evader) of state indices ``(K,)``."""
+        return np.stack(np.unravel_index(np.asarray(index), self.shape)).astype(np.int64)
+
+    def encode(self, cells: np.ndarray) -> np.ndarray:
+        """State indices of cells ``(N + 1, …)``."""
+        return np.ravel_multi_index(tuple(np.asarray(cells)), self.shape)
+
+    def joint_to_actions(self, joint: np.ndarray) -> np.ndarray:
+        """Per-pursuer actions ``(K, N)`` int64 of joint action indices ``(K,)``."""
+        shape = (self.n_actions,) * self.n
+        return np.stack(np.unravel_index(np.asarray(joint), shape), axis=-1).astype(np.int64)
+
+    def valid(self) -> np.ndarray:
+        """``(S,)`` mask of states that can occur: no pursuer on the evader's cell."""
+        cells = self.decode(np.arange(self.n_states))
+        return ~np.any(cells[:-1] == cells[-1], axis=0)
+
+    # ------------------------------------------------------------------ tables
+
+    def _free_table(self) -> np.ndarray:
+        """``(C, A, C, nb)``: 1.0 where pursuer (cell, action) misses evader (cell, move)."""
+        c, a, nb = self.n_cells, self.n_actions, self.n_moves
+        one = GridRules(dataclasses.replace(self.scenario, pursuers=1))
+        p, act, e, b = (g.ravel() for g in np.indices((c, a, c, nb)))
+        _, captured, _, _ = one.apply(np.stack([p, e]), act[:, None], self.evader_moves[b])
+        return 1.0 - captured.reshape(c, a, c, nb).astype(np.float64)
+
+    def _pair_table(self) -> np.ndarray:
+        """``(C, A, C, A)``: collisions (0/1) of two pursuers' (cell, action) pairs."""
+        c, a = self.n_cells, self.n_actions
+        two = GridRules(dataclasses.replace(self.scenario, pursuers=2))
+        pi, ai, pj, aj = (g.ravel() for g in np.indices((c, a, c, a)))
+        cells = np.stack([pi, pj, np.zeros_like(pi)])
+        _, _, collisions, _ = two.apply(cells, np.stack([ai, aj], 1), np.full(len(pi), STAY))
+        return collisions.reshape(c, a, c, a).astype(np.float64)
+
+    def _evader_weights(self) -> np.ndarray | None:
+        """``(S, nb)`` probabilities of the fleeing evader's moves; ``None`` when uniform.
+
+        Flee (SPEC §1): the moves maximising the Manhattan distance from the evader's cell
+        after the move to the nearest pursuer's cell at the start of the step, each equally
+        likely. Two moves that both bump into a wall are two moves, as in the core.
+        """
+        if self.scenario.evader != "flee":
+            return None
+        xy = self.rules.cell_xy
+        cells = self.decode(np.arange(self.n_states))
+        cand = xy[self.emove[cells[-1]]]  # (S, nb, 2)
+        pursuers = xy[cells[:-1]]  # (N, S, 2)
+        dist = np.abs(cand[None] - pursuers[:, :, None, :]).sum(-1).min(0)  # (S, nb)
+        best = dist == dist.max(axis=1, keepdims=True)
+        return best / best.sum(axis=1, keepdims=True)
+
+    # ------------------------------------------------------------------ the backup
+
+    def _chunks(self) -> Iterator[tuple[int, int]]:
+        for lo in range(0, self.n_cells, self.chunk):
+            yield lo, min(self.n_cells, lo + self.chunk)
+
+    def _place(self, table: np.ndarray, axes: tuple[int, ...], lo: int, hi: int) -> np.ndarray:
+        """``table`` reshaped to broadcast over a slice ``[lo, hi)`` of the full tensor.
+
+        The full tensor's axes are ``(p_0, a_0, p_1, a_1, …, p_{N-1}, a_{N-1}, e)``; ``axes``
+        says where each axis of ``table`` goes (in increasing order).
+        """
+        shape = [1] * (2 * self.n + 1)
+        for axis, size in zip(axes, table.shape, strict=True):
+            shape[axis] = size
+        out = table.reshape(shape)
+        return out[lo:hi] if axes[0] == 0 else out
+
+    def _nocoll_chunk(self, lo: int, hi: int) -> np.ndarray:
+        """No pursuer pair collides (``terminate`` mode: the episode goes on), as bool."""
+        out = np.ones(self._slice_shape(lo, hi), dtype=bool)
+        for i in range(self.n):
+            for j in range(i + 1, self.n):
+                axes = (2 * i, 2 * i + 1, 2 * j, 2 * j + 1)
+                out &= self._place(self.pair_collide, axes, lo, hi) == 0
+        return out
+
+    def _slice_shape(self, lo: int, hi: int) -> tuple[int, ...]:
+        c, a = self.n_cells, self.n_actions
+        return (hi - lo, a) + (c, a) * (self.n - 1) + (c,)
+
+    def _reward_is_array(self) -> bool:
+        rw = self.scenario.rewards
+        return bool(rw.wall or rw.capture or self.collision_reward)
+
+    def _reward_chunks(self) -> list[np.ndarray]:
+        """Expected immediate reward per (state, joint action) slice."""
+        rw, n = self.scenario.rewards, self.n
+        out = []
+        capture = None
+        if rw.capture:
+            ones = np.ones(self.shape)
+            capture = [g.copy() for _, _, g in self.expect(ones, collisions=False)]
+        for k, (lo, hi) in enumerate(self._chunks()):
+            r = np.full(self._slice_shape(lo, hi), rw.step)
+            for i in range(n):
+                r += rw.wall * self._place(self.walls, (2 * i, 2 * i + 1), lo, hi)
+                for j in range(i + 1, n):
+                    axes = (2 * i, 2 * i + 1, 2 * j, 2 * j + 1)
+                    r += self.collision_reward * self._place(self.pair_collide, axes, lo, hi)
+            if capture is not None:
+                r += rw.capture * (1.0 - capture[k])
+            out.append(r)
+        return out
+
+    def reward(self, k: int) -> np.ndarray | float:
+        """Expected immediate reward of slice number ``k`` (an array, or the step reward)."""
+        if not self._reward_is_array():
+            return self.scenario.rewards.step
+        if self._reward is None:
+            self._reward = self._reward_chunks()
+        return self._reward[k]
+
+    def _trailing(self, shape: tuple[int, ...]) -> tuple[int, ...]:
+        """``shape`` widened to the last pursuer's ``(cell, action)`` axes.
+
+        Broadcasting a factor whose innermost axis is only ``e`` makes numpy loop over runs
+        of ``C`` elements; widening it to ``(p_{N-1}, a_{N-1}, e)`` makes the runs long.
+        """
+        if self.n < 2:
+            return shape
+        return (*shape[:-3], self.n_cells, self.n_actions, shape[-1])
+
+    def _pre(self, u: np.ndarray, b: int) -> np.ndarray:
+        """Pursuers ``1 … N-1`` and the evader's move ``b`` applied to ``u``: all but ``p_0``."""
+        x = np.take(u, self.emove[:, b], axis=self.n)
+        for i in range(self.n - 1, 0, -1):
+            x = np.take(x, self.pmove, axis=i)
+            shape = (self.n_cells, self.n_actions) + (1, 1) * (self.n - 1 - i) + (self.n_cells,)
+            factor = self.free[:, :, :, b].reshape(shape)
+            x *= np.broadcast_to(factor, self._trailing(shape)).copy()
+        return x
+
+    def _factors(self, lo: int, hi: int) -> list[np.ndarray]:
+        """Per evader move, the ``p_0`` no-capture factor times ``P(b | s)`` for a slice."""
+        c, a, n = self.n_cells, self.n_actions, self.n
+        shape = (hi - lo, a) + (1, 1) * (n - 1) + (c,)
+        out = []
+        for b in range(self.n_moves):
+            factor = self.free[lo:hi, :, :, b].reshape(shape)
+            if self.weights is not None:
+                w = self.weights[:, b].reshape((c,) + (1, c) * n)[lo:hi]
+                factor = factor * w
+            elif self.n_moves > 1:
+                factor = factor / self.n_moves
+            full = np.broadcast_shapes(factor.shape, self._trailing(shape))
+            out.append(np.ascontiguousarray(np.broadcast_to(factor, full)))
+        return out
+
+    def expect(
+        self, u: np.ndarray, collisions: bool = True
+    ) -> Iterator[tuple[int, int, np.ndarray]]:
+        """Yield ``(lo, hi, G)`` for slices ``p_0 ∈ [lo, hi)`` of the full tensor.
+
+        ``G[p_0 - lo, a_0, p_1, a_1, …, e] = Σ_b P(b | s) · P(not terminated | s, a, b) ·
+        u[s']``, ``u`` an array of shape :attr:`shape`. With ``collisions=False`` only a
+        capture terminates (used for the capture probability itself). ``G`` is a buffer
+        reused for the next slice: copy what must outlive the iteration.
+        """
+        pre = [self._pre(u, b) for b in range(self.n_moves)]
+        acc = tmp = None
+        for k, (lo, hi) in enumerate(self._chunks()):
+            shape = self._slice_shape(lo, hi)
+            if acc is None or acc.shape != shape:
+                acc, tmp = np.empty(shape), np.empty(shape)
+            for b, (x, factor) in enumerate(zip(pre, self._factors(lo, hi), strict=True)):
+                out = acc if b == 0 else tmp
+                np.take(x, self.pmove[lo:hi], axis=0, out=out, mode="clip")
+                out *= factor
+                if b:
+                    acc += tmp
+            if collisions and self.terminate:
+                if self._nocoll is None:
+                    self._nocoll = [self._nocoll_chunk(*bounds) for bounds in self._chunks()]
+                acc *= self._nocoll[k]
+            yield lo, hi, acc
