@@ -1,0 +1,181 @@
+"""``python -m a2cm_phys.plot RUN_DIR… [--out DIR]``: learning curves from run logs alone.
+
+Like the paper's figures 5–12: return per episode and steps per episode (each episode
+faint, a moving average bold), and collisions per episode; several runs overlaid (A2C
+against A2CM), each labelled from its log's metadata. A RUN_DIR's ``episodes*.mcap`` files
+(a resumed run writes ``episodes-from-NNNNNNN.mcap``) are read in order as one run; a
+file path is read alone. Writes ``returns.png``, ``lengths.png``, ``collisions.png`` and
+``overview.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .record.reader import LogError, read_run
+
+COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#17becf")
+SERIES = (
+    ("return", "returns.png", "Return per episode", "return (raw team reward)"),
+    ("length", "lengths.png", "Steps per episode", "steps"),
+    ("collisions", "collisions.png", "Collisions per episode", "pursuer collisions"),
+)
+"""(column, file, title, y label) of each figure."""
+
+
+@dataclass
+class Run:
+    """One run's per-episode series, read from its log(s)."""
+
+    label: str
+    title: str
+    columns: dict[str, np.ndarray]
+    clean: bool
+
+
+def log_files(path: Path) -> list[Path]:
+    """The log files of a run: ``path`` itself, or a folder's ``episodes*.mcap`` in order."""
+    if path.is_dir():
+        files = sorted(
+            path.glob("episodes*.mcap"), key=lambda p: (p.name != "episodes.mcap", p.name)
+        )
+        if not files:
+            raise LogError(f"{path}: no episodes*.mcap in this folder")
+        return files
+    if not path.exists():
+        raise LogError(f"{path}: no such file or folder")
+    return [path]
+
+
+def load_run(path: Path) -> Run:
+    """Read every log of a run and concatenate the episodes in order."""
+    logs = [read_run(f) for f in log_files(path)]
+    columns = {
+        k: np.concatenate([lg.episodes[k] for lg in logs])
+        for k in ("return", "length", "collisions", "captured")
+    }
+    sc = logs[0].scenario
+    title = f"{sc.name} ({sc.mode}, collisions {sc.collisions.mode}, {sc.evader} evader)"
+    return Run(
+        label=logs[0].label, title=title, columns=columns, clean=all(lg.clean for lg in logs)
+    )
+
+
+def moving_average(values: np.ndarray, window: int) -> np.ndarray:
+    """Trailing mean over up to ``window`` episodes (shorter at the start)."""
+    values = np.asarray(values, dtype=np.float64)
+    if len(values) == 0:
+        return values
+    csum = np.concatenate([[0.0], np.cumsum(values)])
+    idx = np.arange(1, len(values) + 1)
+    lo = np.maximum(idx - window, 0)
+    return (csum[idx] - csum[lo]) / (idx - lo)
+
+
+def _unique_labels(runs: list[Run], paths: list[Path]) -> list[str]:
+    labels = [r.label for r in runs]
+    return [
+        f"{lab} ({p.name})" if labels.count(lab) > 1 else lab
+        for lab, p in zip(labels, paths, strict=True)
+    ]
+
+
+def _draw(
+    ax: object, runs: list[Run], labels: list[str], column: str, window: int, ylabel: str
+) -> None:
+    for i, (run, label) in enumerate(zip(runs, labels, strict=True)):
+        colour = COLOURS[i % len(COLOURS)]
+        y = run.columns[column].astype(np.float64)
+        x = np.arange(1, len(y) + 1)
+        ax.plot(x, y, color=colour, alpha=0.18, lw=0.6, rasterized=True)
+        ax.plot(
+            x,
+            moving_average(y, window),
+            color=colour,
+            lw=2.0,
+            label=f"{label}: {len(y):,} episodes, mean of last {min(window, len(y))} "
+            f"= {moving_average(y, window)[-1]:.3g}"
+            if len(y)
+            else label,
+        )
+    ax.set_xlabel("episode")
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    ax.margins(x=0.01)
+    if column == "length":
+        top = max((float(r.columns[column].max(initial=1)) for r in runs), default=1.0)
+        if top > 100:
+            ax.set_yscale("log")
+    ax.legend(loc="best", fontsize=8, framealpha=0.85)
+
+
+def plot_runs(runs: list[Run], labels: list[str], out: Path, window: int) -> list[Path]:
+    """Write the figures of ``runs`` into ``out``; return their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    out.mkdir(parents=True, exist_ok=True)
+    titles = sorted({r.title for r in runs})
+    suffix = f" — {'; '.join(titles)}" if titles else ""
+    written = []
+    for column, name, title, ylabel in SERIES:
+        fig = Figure(figsize=(9, 4.8), dpi=120, layout="constrained")
+        ax = fig.add_subplot()
+        _draw(ax, runs, labels, column, window, ylabel)
+        ax.set_title(f"{title} (moving average over {window}){suffix}", fontsize=10)
+        fig.savefig(out / name)
+        written.append(out / name)
+    fig = Figure(figsize=(9, 11), dpi=110, layout="constrained")
+    for k, (column, _, title, ylabel) in enumerate(SERIES):
+        ax = fig.add_subplot(len(SERIES), 1, k + 1)
+        _draw(ax, runs, labels, column, window, ylabel)
+        ax.set_title(title, fontsize=10)
+    fig.suptitle(f"Learning curves (moving average over {window}){suffix}", fontsize=11)
+    fig.savefig(out / "overview.png")
+    written.append(out / "overview.png")
+    return written
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Plot the runs; return the exit code (2 on errors)."""
+    p = argparse.ArgumentParser(
+        prog="python -m a2cm_phys.plot", description="Learning curves (PNG) from run logs."
+    )
+    p.add_argument(
+        "runs", type=Path, nargs="+", metavar="RUN_DIR", help="run folders (or episodes.mcap files)"
+    )
+    p.add_argument(
+        "--out",
+        type=Path,
+        help="output folder (default: the run's folder if one run, else ./plots)",
+    )
+    p.add_argument("--window", type=int, default=100, help="moving-average window (episodes)")
+    args = p.parse_args(argv)
+    try:
+        runs = [load_run(path) for path in args.runs]
+    except LogError as err:
+        print(f"plot: error: {err}", file=sys.stderr)
+        return 2
+    if args.window < 1:
+        print("plot: error: --window must be >= 1", file=sys.stderr)
+        return 2
+    out = args.out or (
+        args.runs[0] if len(args.runs) == 1 and args.runs[0].is_dir() else Path("plots")
+    )
+    for run, path in zip(runs, args.runs, strict=True):
+        if not run.clean:
+            print(f"note: {path}: a log was not closed cleanly; plotting what was recovered")
+    for path in plot_runs(runs, _unique_labels(runs, args.runs), out, args.window):
+        print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,295 @@
+"""Read a run log ``episodes.mcap``, cleanly closed or cut short by a crash.
+
+The file is read in one pass with the ``mcap`` library's :class:`~mcap.stream_reader.StreamReader`
+(CRCs checked), which needs no summary section. A run killed mid-write leaves a file that
+ends in a partial record: reading stops there, everything in the complete chunks before it
+is kept, and :attr:`RunLog.clean` is ``False``. The writer puts every message of an episode
+in one chunk, so an episode is either recovered whole or not at all.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import zstandard
+from mcap.exceptions import InvalidMagic, McapError
+from mcap.records import Channel, Footer, Message, Metadata
+from mcap.stream_reader import StreamReader
+
+from ..config import ConfigError, Scenario, build
+from .schemas import (
+    METADATA_NAME,
+    SCENE_TOPIC_PREFIX,
+    SUMMARY_TOPIC,
+    TRAJECTORY_TOPIC,
+    UPDATE_TOPIC,
+)
+
+
+class LogError(Exception):
+    """A run log cannot be read (missing, not an MCAP, not ours); the message says why."""
+
+
+@dataclass
+class Trajectory:
+    """One episode as logged: ``positions``/``velocities`` have ``length + 1`` rows (row 0
+    is the start), the per-step arrays ``length`` rows. Agents: pursuers, then the evader."""
+
+    episode: int
+    env: int
+    seed: int
+    t0: float
+    dt: float
+    positions: np.ndarray  # (L + 1, N + 1, 2)
+    actions: np.ndarray  # (L, N + 1) int64: pursuers, then the evader
+    reward: np.ndarray  # (L,) float64
+    captured: np.ndarray  # (L,) bool
+    collisions: np.ndarray  # (L,) int64
+    wall_contacts: np.ndarray  # (L,) int64
+    velocities: np.ndarray | None = None  # (L + 1, N + 1, 2), physics only
+    events: list[tuple[str, str, str, int]] | None = None  # physics only
+
+    @property
+    def length(self) -> int:
+        """Steps taken."""
+        return len(self.reward)
+
+    @staticmethod
+    def from_block(doc: dict[str, Any]) -> list[Trajectory]:
+        """Split one ``/episodes/trajectories`` message into its episodes."""
+        lengths = np.asarray(doc["length"], dtype=np.int64)
+        states = np.cumsum(lengths + 1)
+        steps = np.cumsum(lengths)
+        pos = np.asarray(doc["positions"])
+        agents = pos.shape[1] // 2 if pos.ndim == 2 else 0
+        pos = pos.reshape(len(pos), agents, 2)
+        vel = doc.get("velocities")
+        vel = None if vel is None else np.asarray(vel, dtype=np.float64).reshape(pos.shape)
+        act = np.asarray(doc["actions"], dtype=np.int64).reshape(-1, agents)
+        reward = np.asarray(doc["reward"], dtype=np.float64)
+        captured = np.asarray(doc["captured"], dtype=bool)
+        collisions = np.asarray(doc["collisions"], dtype=np.int64)
+        walls = np.asarray(doc["wall_contacts"], dtype=np.int64)
+        events = doc.get("events")
+        out = []
+        for j, length in enumerate(lengths.tolist()):
+            a, b = states[j] - length - 1, states[j]
+            c, d = steps[j] - length, steps[j]
+            out.append(
+                Trajectory(
+                    episode=int(doc["episode"][j]),
+                    env=int(doc["env"][j]),
+                    seed=int(doc["seed"][j]),
+                    t0=float(doc["t0"][j]),
+                    dt=float(doc["dt"]),
+                    positions=pos[a:b],
+                    actions=act[c:d],
+                    reward=reward[c:d],
+                    captured=captured[c:d],
+                    collisions=collisions[c:d],
+                    wall_contacts=walls[c:d],
+                    velocities=None if vel is None else vel[a:b],
+                    events=None if events is None else [tuple(e) for e in events[j]],
+                )
+            )
+        return out
+
+
+SUMMARY_FIELDS = (
+    "episode",
+    "env",
+    "length",
+    "return",
+    "captured",
+    "truncated",
+    "collision_terminated",
+    "collisions",
+    "wall_contacts",
+    "t0",
+    "t1",
+    "logged",
+)
+"""Columns of :attr:`RunLog.episodes` besides ``seed``."""
+
+
+@dataclass
+class RunLog:
+    """Everything read from one run log.
+
+    ``episodes`` holds the summaries column-wise (numpy arrays keyed by
+    :data:`SUMMARY_FIELDS` and ``seed``), in episode order. ``updates`` is the list of update
+    messages. ``metadata`` the run's metadata (values decoded from JSON).
+    """
+
+    path: Path
+    metadata: dict[str, Any]
+    episodes: dict[str, np.ndarray]
+    updates: list[dict[str, Any]]
+    clean: bool
+    error: str | None = None
+    topic_counts: dict[str, int] = field(default_factory=dict)
+    _blocks: list[bytes] = field(default_factory=list, repr=False)
+    _where: dict[int, int] = field(default_factory=dict, repr=False)
+    _cache: tuple[int, dict[int, Trajectory]] | None = field(default=None, repr=False)
+
+    @property
+    def n_episodes(self) -> int:
+        """Episodes recovered (one summary each)."""
+        return len(self.episodes["episode"])
+
+    @property
+    def scenario(self) -> Scenario:
+        """The run's resolved scenario, rebuilt from the metadata (validated)."""
+        data = self.metadata.get("scenario")
+        if not isinstance(data, dict):
+            raise LogError(f"{self.path}: the metadata holds no scenario")
+        try:
+            return build(Scenario, data, f"{self.path} metadata")
+        except ConfigError as err:
+            raise LogError(str(err)) from None
+
+    @property
+    def label(self) -> str:
+        """A short name for plots: metadata ``label``, else the algorithm, else the file."""
+        train = self.metadata.get("train")
+        algo = self.metadata.get("algo") or (train.get("algo") if isinstance(train, dict) else None)
+        return str(self.metadata.get("label") or (algo.upper() if algo else self.path.parent.name))
+
+    @property
+    def logged_episodes(self) -> list[int]:
+        """Ids of the episodes whose trajectory is in the log, ascending."""
+        return sorted(self._where)
+
+    def trajectory(self, episode: int) -> Trajectory:
+        """The logged trajectory of ``episode``; ``KeyError`` if it is not in the log."""
+        block = self._where[episode]
+        if self._cache is None or self._cache[0] != block:
+            trajs = Trajectory.from_block(json.loads(self._blocks[block]))
+            self._cache = (block, {t.episode: t for t in trajs})
+        return self._cache[1][episode]
+
+    def trajectories(self) -> Iterator[Trajectory]:
+        """Every logged trajectory, in the order they were written."""
+        for data in self._blocks:
+            yield from Trajectory.from_block(json.loads(data))
+
+
+def _decode_metadata(data: dict[str, str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
+_TRUNCATION_ERRORS = (McapError, struct.error, ValueError, zstandard.ZstdError, EOFError)
+
+
+def read_run(path: str | Path) -> RunLog:
+    """Read ``path`` (an ``episodes.mcap`` or a run folder holding one).
+
+    Raises :class:`LogError` if the file is missing or is not an MCAP file; a file that
+    ends early is read up to its last complete chunk (``clean`` is then ``False``).
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "episodes.mcap"
+    if not path.is_file():
+        raise LogError(f"{path}: no such file")
+    metadata: dict[str, Any] = {}
+    summaries: list[dict[str, Any]] = []
+    updates: list[dict[str, Any]] = []
+    blocks: list[bytes] = []
+    where: dict[int, int] = {}
+    counts: dict[str, int] = {}
+    topics: dict[int, str] = {}
+    clean, error = False, None
+    with open(path, "rb") as fh:
+        reader = StreamReader(fh, validate_crcs=True)
+        records = reader.records
+        try:
+            for record in records:
+                if isinstance(record, Message):
+                    topic = topics[record.channel_id]
+                    counts[topic] = counts.get(topic, 0) + 1
+                    if topic == SUMMARY_TOPIC:
+                        summaries.append(json.loads(record.data))
+                    elif topic == TRAJECTORY_TOPIC:
+                        for episode in _episode_ids(record.data):
+                            where[episode] = len(blocks)
+                        blocks.append(record.data)
+                    elif topic == UPDATE_TOPIC:
+                        updates.append(json.loads(record.data))
+                elif isinstance(record, Channel):
+                    topics[record.id] = record.topic
+                elif isinstance(record, Metadata) and record.name == METADATA_NAME:
+                    metadata = _decode_metadata(record.metadata)
+                elif isinstance(record, Footer):
+                    clean = True
+        except InvalidMagic:
+            raise LogError(f"{path}: not an MCAP file") from None
+        except _TRUNCATION_ERRORS as err:
+            if not topics and not metadata:
+                raise LogError(
+                    f"{path}: not an MCAP run log, or cut before its metadata ({_describe(err)})"
+                ) from None
+            error = _describe(err)
+            clean = False  # a footer without the closing magic is not a clean end
+    if not metadata:
+        raise LogError(f"{path}: not an a2cm_phys run log (no '{METADATA_NAME}' metadata)")
+    return RunLog(
+        path=path,
+        metadata=metadata,
+        episodes=_columns(summaries),
+        updates=updates,
+        clean=clean,
+        error=error,
+        topic_counts=counts,
+        _blocks=blocks,
+        _where=where,
+    )
+
+
+def _episode_ids(data: bytes) -> list[int]:
+    """The ``episode`` array of a trajectory block, read without decoding the whole block."""
+    prefix = b'{"episode":'
+    if data.startswith(prefix):
+        return json.loads(data[len(prefix) : data.index(b"]") + 1])
+    return json.loads(data)["episode"]
+
+
+def _describe(err: BaseException) -> str:
+    name = type(err).__name__
+    text = str(err)
+    return f"{name}: {text}" if text else name
+
+
+def _columns(blocks: list[dict[str, Any]]) -> dict[str, np.ndarray]:
+    dtypes = {
+        "return": np.float64,
+        "t0": np.float64,
+        "t1": np.float64,
+        "captured": bool,
+        "truncated": bool,
+        "collision_terminated": bool,
+        "logged": bool,
+    }
+    cols = {
+        k: np.array([v for b in blocks for v in b[k]], dtype=dtypes.get(k, np.int64))
+        for k in SUMMARY_FIELDS
+    }
+    cols["seed"] = np.array([int(v) for b in blocks for v in b["seed"]], dtype=np.uint64)
+    return cols
+
+
+def scene_topics(log: RunLog) -> list[str]:
+    """The SceneUpdate topics present in ``log``."""
+    return sorted(t for t in log.topic_counts if t.startswith(SCENE_TOPIC_PREFIX))
