@@ -1,0 +1,355 @@
+"""Physics mode (SPEC §3): the pursuit game in pymunk, one :class:`pymunk.Space` per game.
+
+Walls are four static boxes outside ``[0, size]²`` (inner edges on the boundary), pursuers
+dynamic square boxes, the evader a dynamic disc, all with rotation locked. Each agent is
+driven by a *velocity servo* (pymunk's tank-example idiom): a kinematic control body moving
+at the commanded velocity, pinned to the agent by a :class:`pymunk.PivotJoint` with
+``max_bias = 0`` (no position correction: it only matches velocities) and ``max_force =
+physics.max_force``. The joint pulls the agent up to speed and holds it there like floor
+friction, while the contact solver, which is not force-limited, stops agents at walls and
+lets them push and be pushed: the controller never moves a body itself.
+
+One env step is one second of simulated time in ``physics.substeps`` fixed substeps. The
+only Python work per substep is one call of chipmunk's step function (see
+:func:`_stepper`); contact callbacks (:meth:`pymunk.Space.on_collision`) run only when
+shapes begin or stop touching and just feed a :class:`~.contacts.ContactTracker`, which
+turns them into the step's events (debounced: see :mod:`.contacts`); the penalties are
+:func:`~.contacts.score_events`. Actions and the evader's moves are applied at the start
+of a step; since pymunk moves bodies before it solves velocities, an agent starting from
+rest covers ``max_speed × (1 − 1/substeps)`` in its first step and exactly ``max_speed``
+per step once at speed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from enum import IntEnum
+from functools import partial
+from itertools import combinations
+from typing import Any
+
+import numpy as np
+import pymunk
+
+from ..config import Scenario
+from .contacts import (
+    AGENT_WALL,
+    PURSUER_EVADER,
+    PURSUER_PURSUER,
+    ContactTracker,
+    Pair,
+    score_events,
+)
+from .core import ACTION_DELTAS, StepOutcome, agent_names, default_start, parse_positions
+from .evader import STAY, evader_actions
+
+
+class CollisionType(IntEnum):
+    """pymunk collision types of the shapes; contact handlers are keyed on pairs of them."""
+
+    PURSUER = 1
+    EVADER = 2
+    WALL = 3
+
+
+COLLISION_SLOP = 0.01
+"""Allowed overlap (m) before the solver pushes shapes apart; pymunk's default, 0.1, is sized
+for pixels and would let 0.6 m boxes sink 10 cm into each other."""
+
+Callback = Callable[[pymunk.Arbiter, pymunk.Space, Any], None]
+
+DIRECT_STEP = True
+"""Step spaces through chipmunk's C function directly (see :func:`_stepper`)."""
+
+_HANDLED = (
+    (CollisionType.PURSUER, CollisionType.PURSUER),
+    (CollisionType.PURSUER, CollisionType.EVADER),
+    (CollisionType.PURSUER, CollisionType.WALL),
+    (CollisionType.EVADER, CollisionType.WALL),
+)
+
+
+def _pair_table(scenario: Scenario) -> list[list[Pair]]:
+    """``table[i][j]``: the contact pair of shapes tagged ``i`` and ``j`` (agents ``0 … N``,
+    ``N + 1`` the wall), in canonical order: lower pursuer first, agents before the wall."""
+    names = [*agent_names(scenario), "wall"]
+    n = scenario.pursuers
+    # The diagonal (a shape with itself) never touches; wall–wall pairs are not handled.
+    table: list[list[Pair]] = [[("", "", "")] * (n + 2) for _ in range(n + 2)]
+    for i, j in combinations(range(n + 2), 2):
+        kind = PURSUER_PURSUER if j < n else PURSUER_EVADER if j == n else AGENT_WALL
+        table[i][j] = table[j][i] = (kind, names[i], names[j])
+    return table
+
+
+class World:
+    """One game's pymunk space: walls, agent bodies, their servo control bodies, contacts.
+
+    Shapes keep pymunk's default friction and elasticity, both 0: agents slide along walls
+    and each other without bouncing, and the servo plays the part of floor friction.
+    """
+
+    __slots__ = ("bodies", "commands", "controls", "space", "step", "tracker")
+
+    def __init__(self, scenario: Scenario, xy: np.ndarray, table: list[list[Pair]]) -> None:
+        ph, size, n = scenario.physics, float(scenario.size), scenario.pursuers
+        space = pymunk.Space()
+        space.collision_slop = COLLISION_SLOP
+        tags: dict[pymunk.Shape, int] = {}  # shape -> row of the pair table
+        t = ph.wall_thickness
+        for x0, y0, x1, y1 in (
+            (-t, -t, 0.0, size + t),  # left
+            (size, -t, size + t, size + t),  # right
+            (0.0, -t, size, 0.0),  # bottom
+            (0.0, size, size, size + t),  # top
+        ):
+            wall = pymunk.Poly(space.static_body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+            wall.collision_type = CollisionType.WALL
+            tags[wall] = n + 1
+            space.add(wall)
+        self.bodies: list[pymunk.Body] = []
+        self.controls: list[pymunk.Body] = []
+        for i, (x, y) in enumerate(xy.tolist()):
+            body = pymunk.Body(ph.mass, float("inf"))
+            body.position = (x, y)
+            if i < n:
+                shape: pymunk.Shape = pymunk.Poly.create_box(body, (ph.box_side, ph.box_side))
+                shape.collision_type = CollisionType.PURSUER
+            else:
+                shape = pymunk.Circle(body, ph.evader_radius)
+                shape.collision_type = CollisionType.EVADER
+            tags[shape] = i
+            control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+            servo = pymunk.PivotJoint(control, body, (0.0, 0.0), (0.0, 0.0))
+            servo.max_bias = 0.0
+            servo.max_force = ph.max_force
+            space.add(body, shape, control, servo)
+            self.bodies.append(body)
+            self.controls.append(control)
+        self.commands: list[int] = [STAY] * (n + 1)  # the action each control body executes
+        self.tracker = ContactTracker()
+        begin, separate = _callbacks(self.tracker, table, tags)
+        for a, b in _HANDLED:
+            space.on_collision(a, b, begin=begin, separate=separate)
+        self.space = space
+        self.step = _stepper(space)
+
+    def dispose(self) -> None:
+        """Unhook the contact callbacks, so that freeing the space (which reports every
+        remaining contact as separated) calls no Python."""
+        for a, b in _HANDLED:
+            self.space.on_collision(a, b, separate=pymunk.empty_callback)
+
+
+def _stepper(space: pymunk.Space) -> Callable[[float], None]:
+    """A function advancing ``space`` by ``dt``: chipmunk's ``cpSpaceStep`` called directly
+    when :data:`DIRECT_STEP` is on and this pymunk exposes it, else :meth:`Space.step`.
+
+    ``Space.step`` wraps the same C call in Python bookkeeping for objects added or removed
+    from callbacks, which ours never do; at 10 substeps per env step the wrapper costs as
+    much as the simulation itself. The trajectories are the same bit for bit (tested).
+    """
+    cp_step = getattr(pymunk.cp, "cpSpaceStep", None)
+    cp_space = getattr(space, "_space", None)
+    if not DIRECT_STEP or cp_step is None or cp_space is None:
+        return space.step
+    return partial(cp_step, cp_space)
+
+
+def _callbacks(
+    tracker: ContactTracker, table: list[list[Pair]], tags: dict[pymunk.Shape, int]
+) -> tuple[Callback, Callback]:
+    """The begin/separate callbacks of one space: they only record into ``tracker``."""
+
+    def begin(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+        a, b = arbiter.shapes
+        tracker.begin(table[tags[a]][tags[b]])
+
+    def separate(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+        a, b = arbiter.shapes
+        tracker.separate(table[tags[a]][tags[b]])
+
+    return begin, separate
+
+
+def start_positions(scenario: Scenario) -> np.ndarray:
+    """Default start ``(N + 1, 2)`` in metres: the grid mode's start cells' centres."""
+    return default_start(scenario.size, scenario.pursuers).astype(np.float64) + 0.5
+
+
+def observation(scenario: Scenario, state: np.ndarray) -> np.ndarray:
+    """Observations ``(B, 4 (N + 1))`` float32 of a state ``(B, 2, N + 1, 2)`` (positions,
+    velocities): all positions / ``size``, then all velocities / ``max_speed`` (SPEC §5)."""
+    scale = np.array([scenario.size, scenario.physics.max_speed], dtype=np.float64)
+    return (state / scale[:, None, None]).astype(np.float32).reshape(len(state), -1)
+
+
+def placed_positions(scenario: Scenario, placed: Mapping[str, Sequence[float]]) -> np.ndarray:
+    """Validate ``reset(options={"positions": placed})`` for physics mode: ``(N + 1, 2)`` metres.
+
+    Agents not named keep their default start. Every body must lie inside the arena and
+    no two may overlap (touching is fine); a ``ValueError`` names the agent(s) at fault.
+    """
+    ph, size, n = scenario.physics, scenario.size, scenario.pursuers
+    names = agent_names(scenario)
+    ext = np.array([ph.box_side / 2] * n + [ph.evader_radius])  # centre to edge
+    xy = parse_positions(scenario, placed, float(ext.min()), size - float(ext.min()))
+    for i, name in enumerate(names):
+        if np.any(xy[i] < ext[i]) or np.any(xy[i] > size - ext[i]):
+            raise ValueError(
+                f"positions[{name!r}] = {tuple(xy[i].tolist())} puts {name} into the wall "
+                f"(each coordinate in [{ext[i]:g}, {size - ext[i]:g}])"
+            )
+    for i, j in combinations(range(n + 1), 2):
+        d = np.abs(xy[i] - xy[j])
+        # Two axis-aligned boxes, or a box and the disc (its centre nearer than its radius).
+        box_gap = np.hypot(*np.maximum(d - ext[i], 0.0))
+        if (d.max() < 2 * ext[i]) if j < n else (box_gap < ext[j]):
+            raise ValueError(
+                f"positions: {names[i]} at {tuple(xy[i].tolist())} and "
+                f"{names[j]} at {tuple(xy[j].tolist())} overlap"
+            )
+    return xy
+
+
+class PhysicsCore:
+    """``num_envs`` independent physics games of one scenario (implements ``core.Core``)."""
+
+    def __init__(self, scenario: Scenario, num_envs: int = 1) -> None:
+        if scenario.mode != "physics":
+            raise ValueError(f"PhysicsCore needs a physics scenario, got mode={scenario.mode!r}")
+        ph, n = scenario.physics, scenario.pursuers
+        smallest = min(ph.box_side, 2 * ph.evader_radius)
+        if 2 * ph.max_speed / ph.substeps >= smallest:
+            raise ValueError(
+                f"physics.substeps = {ph.substeps} is too few: two agents closing at "
+                f"2 × max_speed would move {2 * ph.max_speed / ph.substeps:g} m per substep, "
+                f"enough to pass through a {smallest:g} m body; use more than "
+                f"{int(2 * ph.max_speed / smallest)} substeps"
+            )
+        self.scenario = scenario
+        self.num_envs = num_envs
+        self.t = np.zeros(num_envs, dtype=np.int64)
+        self.episode_seed = np.zeros(num_envs, dtype=np.uint64)
+        self._table = _pair_table(scenario)
+        self._start = start_positions(scenario)
+        self._dt = 1.0 / ph.substeps
+        self._velocity = [tuple(v) for v in (ACTION_DELTAS * ph.max_speed).astype(float).tolist()]
+        self._worlds = [World(scenario, self._start, self._table) for _ in range(num_envs)]
+        self._spares: list[World] = []  # fresh worlds at the default start, built in advance
+        self._state = np.zeros((num_envs, 2, n + 1, 2))  # [game, position|velocity, agent, xy]
+        self._state[:, 0] = self._start
+
+    # ------------------------------------------------------------------ reset
+
+    def reset(
+        self,
+        envs: np.ndarray,
+        seeds: np.ndarray,
+        positions: Sequence[Mapping[str, Sequence[float]] | None] | None = None,
+    ) -> None:
+        """Start new episodes in games ``envs``: rebuild their spaces, at the default start
+        or at explicit ``positions`` (one mapping or ``None`` per game, metres)."""
+        envs = np.atleast_1d(np.asarray(envs, dtype=np.int64))
+        placed = list(positions or ())
+        starts = [self._start] * len(envs)
+        for k, where in enumerate(placed[: len(envs)]):
+            if where:  # validate everything before touching any game
+                starts[k] = placed_positions(self.scenario, where)
+        for env, xy in zip(envs.tolist(), starts, strict=True):
+            self._worlds[env].dispose()
+            if xy is self._start and self._spares:
+                self._worlds[env] = self._spares.pop()
+            else:
+                self._worlds[env] = World(self.scenario, xy, self._table)
+            self._state[env, 0], self._state[env, 1] = xy, 0.0
+        self.t[envs] = 0
+        self.episode_seed[envs] = seeds
+
+    def build_spare(self) -> int:
+        """Build one world at the default start for a later :meth:`reset` to take, and
+        return how many are waiting. Building is most of a reset's cost; a caller with idle
+        time (a worker process waiting for its next request) can spend it here. A spare is
+        a world built exactly as ``reset`` would build it and never stepped, so using one
+        changes nothing but when the work is done."""
+        self._spares.append(World(self.scenario, self._start, self._table))
+        return len(self._spares)
+
+    # ------------------------------------------------------------------ step
+
+    def step(self, actions: np.ndarray) -> StepOutcome:
+        """Advance every game one second with the pursuers' ``(B, N)`` actions."""
+        sc, n = self.scenario, self.scenario.pursuers
+        pos = self._state[:, 0]
+        low = float(sc.physics.evader_radius)
+        evader = evader_actions(
+            sc, self.episode_seed, self.t, pos[:, n], pos[:, :n], low, sc.size - low
+        )
+        self.t += 1
+        velocity, dt, substeps = self._velocity, self._dt, range(sc.physics.substeps)
+        state = []
+        events = []
+        for world, row, e, step in zip(
+            self._worlds, actions.tolist(), evader.tolist(), self.t.tolist(), strict=True
+        ):
+            row.append(e)
+            commands = world.commands
+            if row != commands:  # setting a pymunk attribute costs microseconds: only changes
+                for i, (control, a, was) in enumerate(
+                    zip(world.controls, row, commands, strict=True)
+                ):
+                    if a != was:
+                        control.velocity = velocity[a]
+                        commands[i] = a
+            space_step = world.step
+            for _ in substeps:
+                space_step(dt)
+            events.append(world.tracker.end_step(step))
+            for body in world.bodies:
+                state.extend(body.position)
+            for body in world.bodies:
+                state.extend(body.velocity)
+        self._state[:] = np.array(state).reshape(self._state.shape)
+        return self._score(events, evader)
+
+    def _score(self, events: list[list], evader: np.ndarray) -> StepOutcome:
+        sc, b = self.scenario, self.num_envs
+        reward = np.full(b, sc.rewards.step, dtype=np.float64)
+        terminated = np.zeros(b, dtype=bool)
+        captured = np.zeros(b, dtype=bool)
+        collisions = np.zeros(b, dtype=np.int64)
+        walls = np.zeros(b, dtype=np.int64)
+        for g, game_events in enumerate(events):
+            if game_events:  # no events score rewards.step and nothing else
+                s = score_events(game_events, sc.rewards, sc.collisions.mode)
+                reward[g], terminated[g], captured[g] = s.reward, s.terminated, s.captured
+                collisions[g], walls[g] = s.collisions, s.wall_contacts
+        truncated = (self.t >= sc.max_steps) & ~terminated
+        return StepOutcome(
+            reward=reward,
+            terminated=terminated,
+            truncated=truncated,
+            captured=captured,
+            collisions=collisions,
+            wall_contacts=walls,
+            evader_action=evader,
+            events=events,
+        )
+
+    # ------------------------------------------------------------------ views
+
+    def observe(self) -> np.ndarray:
+        """``(B, 4 (N + 1))`` float32: all positions / ``size``, then velocities / ``max_speed``."""
+        return observation(self.scenario, self._state)
+
+    def positions(self) -> np.ndarray:
+        """Agent centres ``(B, N + 1, 2)`` in metres: pursuers, then the evader."""
+        return self._state[:, 0].copy()
+
+    def velocities(self) -> np.ndarray:
+        """Agent velocities ``(B, N + 1, 2)`` in m/s."""
+        return self._state[:, 1].copy()
+
+    def kinetic_energy(self) -> np.ndarray:
+        """Total kinetic energy (J) of each game's agents, ``(B,)``."""
+        return 0.5 * self.scenario.physics.mass * (self._state[:, 1] ** 2).sum(axis=(1, 2))
