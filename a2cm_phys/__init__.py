@@ -25,4 +25,4 @@ GYM_ID = "a2cm_phys/Pursuit-v0"
 if GYM_ID not in gymnasium.registry:
     gymnasium.register(id=GYM_ID, entry_point="a2cm_phys.envs.gym:PursuitEnv")
 
-__all__ = ["ConfigError", "GYM_ID", "PursuitParallelEnv", "Scenario", "load_scenario", "make_env"]
+__all__ = ["GYM_ID", "ConfigError", "PursuitParallelEnv", "Scenario", "load_scenario", "make_env"]

@@ -75,7 +75,9 @@ def main() -> None:
     print(f"command: python benchmarks/bench_grid.py --repeats {args.repeats} --steps {args.steps}")
     print("| what | median | ratio |")
     print("|---|---|---|")
-    print(f"| PettingZoo pursuit_v5 (5x5, 3 pursuers, 1 evader) | {med(theirs):,.0f} steps/s | 1.0 |")
+    print(
+        f"| PettingZoo pursuit_v5 (5x5, 3 pursuers, 1 evader) | {med(theirs):,.0f} steps/s | 1.0 |"
+    )
     print(f"| a2cm_phys make_env('grid') | {med(ours):,.0f} steps/s | {med(ratios):.1f}x |")
     print(
         f"| a2cm_phys GridCore, B=4096, one core | {med(core) / 1e6:.2f} M env-steps/s |"

@@ -52,7 +52,7 @@ def test_same_seed_same_trajectory(scenario):
             if not env.agents:
                 obs, _ = env.reset()
             acts = {a: int(rng.integers(4)) for a in env.agents}
-            obs, rew, *_ = env.step(acts)
+            obs, *_ = env.step(acts)
             trace.append(obs["pursuer_0"])
         return np.stack(trace)
 
@@ -99,7 +99,9 @@ def test_infos_carry_the_step_facts():
     _, infos = env.reset(seed=0)
     assert set(infos) == set(env.agents)
     _, _, _, _, infos = env.step({a: 0 for a in env.agents})
-    assert {"captured", "collisions", "wall_contacts", "evader_action", "t"} <= set(infos["pursuer_0"])
+    assert {"captured", "collisions", "wall_contacts", "evader_action", "t"} <= set(
+        infos["pursuer_0"]
+    )
 
 
 def test_vector_env_reports_finished_episodes_and_final_observation():
@@ -109,7 +111,7 @@ def test_vector_env_reports_finished_episodes_and_final_observation():
     start = obs.copy()
     # env 0 walks up 5 times (truncated at t=5); the others stay put by bumping walls
     actions = np.array([[0, 1, 1], [1, 1, 0], [1, 1, 0]])
-    for t in range(5):
+    for _ in range(5):
         step = env.step(actions)
     assert step.truncated.all() and not step.terminated.any()
     assert [e.env for e in step.episodes] == [0, 1, 2]

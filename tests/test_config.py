@@ -19,10 +19,14 @@ from a2cm_phys.config import (
 
 
 def test_named_scenarios_load_and_mean_what_they_say():
-    assert {"grid", "grid_collision", "grid_collision_continue", "grid_flee"} <= set(scenario_names())
+    assert {"grid", "grid_collision", "grid_collision_continue", "grid_flee"} <= set(
+        scenario_names()
+    )
     exp2 = load_scenario("grid_collision")
     assert (exp2.rewards.step, exp2.rewards.collision, exp2.collisions.mode) == (
-        -1000.0, -150_000_000.0, "terminate",
+        -1000.0,
+        -150_000_000.0,
+        "terminate",
     )
     assert load_scenario("grid_collision_continue").collisions.mode == "penalize"
     assert load_scenario("grid").collisions.mode == "off"
@@ -33,7 +37,7 @@ def test_named_scenarios_load_and_mean_what_they_say():
 
 def test_a_scenario_can_be_a_path(tmp_path):
     path = tmp_path / "mine.toml"
-    path.write_text('size = 3\npursuers = 2\n[rewards]\nstep = -2\n')
+    path.write_text("size = 3\npursuers = 2\n[rewards]\nstep = -2\n")
     sc = load_scenario(path)
     assert (sc.name, sc.size, sc.pursuers, sc.rewards.step) == ("mine", 3, 2, -2.0)
 
@@ -62,7 +66,7 @@ def test_bad_values_name_the_key(overrides, key, why):
 
 def test_bad_file_names_file_and_key(tmp_path):
     path = tmp_path / "broken.toml"
-    path.write_text('size = 5\n[rewards]\nstpe = -1\n')
+    path.write_text("size = 5\n[rewards]\nstpe = -1\n")
     with pytest.raises(ConfigError, match=r"broken\.toml: key 'rewards\.stpe': unknown key"):
         load_scenario(path)
     path.write_text("size = = 5\n")
@@ -71,12 +75,14 @@ def test_bad_file_names_file_and_key(tmp_path):
 
 
 def test_unknown_scenario_lists_the_named_ones():
-    with pytest.raises(ConfigError, match="unknown scenario 'gird'.*grid_collision"):
+    with pytest.raises(ConfigError, match=r"unknown scenario 'gird'.*grid_collision"):
         load_scenario("gird")
 
 
 def test_overrides_from_code_and_command_line_agree():
-    from_cli = load_scenario("grid", parse_assignments(["rewards.step=-2", "evader=flee", "size=6"]))
+    from_cli = load_scenario(
+        "grid", parse_assignments(["rewards.step=-2", "evader=flee", "size=6"])
+    )
     from_code = make_env("grid", size=6, evader="flee", rewards={"step": -2}).scenario
     assert from_cli == from_code
     assert from_cli.rewards.collision == 0.0  # the rest of the table is kept
@@ -97,9 +103,20 @@ def test_training_options_are_validated():
 
 def test_cli_config_error_is_one_line_without_traceback():
     proc = subprocess.run(
-        [sys.executable, "-m", "a2cm_phys.train", "--scenario", "grid", "--set", "size=1",
-         "--updates", "1"],
-        capture_output=True, text=True, timeout=120,
+        [
+            sys.executable,
+            "-m",
+            "a2cm_phys.train",
+            "--scenario",
+            "grid",
+            "--set",
+            "size=1",
+            "--updates",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr

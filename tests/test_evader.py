@@ -35,8 +35,15 @@ def test_flee_breaks_ties_uniformly():
     evader = np.array([[2.0, 2.0]])
     pursuers = np.array([[[2.0, 4.0]]])
     seeds = np.arange(3000, dtype=np.uint64)
-    acts = flee_actions(seeds, np.zeros(3000, dtype=np.int64), np.repeat(evader, 3000, 0),
-                        np.repeat(pursuers, 3000, 0), 4, 0, 4)
+    acts = flee_actions(
+        seeds,
+        np.zeros(3000, dtype=np.int64),
+        np.repeat(evader, 3000, 0),
+        np.repeat(pursuers, 3000, 0),
+        4,
+        0,
+        4,
+    )
     counts = np.bincount(acts, minlength=4)
     assert counts[0] == 0
     assert all(900 < c < 1100 for c in counts[1:])
@@ -44,6 +51,7 @@ def test_flee_breaks_ties_uniformly():
 
 def test_static_evader_stays():
     sc = load_scenario("grid", {"evader": "static"})
-    acts = evader_actions(sc, np.zeros(3, dtype=np.uint64), np.zeros(3, dtype=np.int64),
-                          None, None, 0, 4)
+    acts = evader_actions(
+        sc, np.zeros(3, dtype=np.uint64), np.zeros(3, dtype=np.int64), None, None, 0, 4
+    )
     np.testing.assert_array_equal(acts, [4, 4, 4])

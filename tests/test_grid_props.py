@@ -59,8 +59,15 @@ def test_batched_core_equals_single_games(game):
             if not live[i]:
                 continue
             single = core.step(acts[i : i + 1])
-            for field in ("reward", "terminated", "truncated", "captured", "collisions",
-                          "wall_contacts", "evader_action"):
+            for field in (
+                "reward",
+                "terminated",
+                "truncated",
+                "captured",
+                "collisions",
+                "wall_contacts",
+                "evader_action",
+            ):
                 assert getattr(single, field)[0] == getattr(out, field)[i], field
             np.testing.assert_array_equal(core.positions()[0], together.positions()[i])
             np.testing.assert_array_equal(core.observe()[0], together.observe()[i])

@@ -17,7 +17,9 @@ def play(positions, pursuer_actions, evader_action=STAY, scenario="grid", **over
     sc = load_scenario(scenario, {"evader": "static", **overrides})
     core = GridCore(sc, 1)
     names = [*sc.agents, "evader"]
-    core.reset(np.array([0]), np.array([0], dtype=np.uint64), [dict(zip(names, positions))])
+    core.reset(
+        np.array([0]), np.array([0], dtype=np.uint64), [dict(zip(names, positions, strict=True))]
+    )
     new, captured, collisions, walls = core.rules.apply(
         core.cells, np.array([pursuer_actions]), np.array([evader_action])
     )
@@ -27,21 +29,22 @@ def play(positions, pursuer_actions, evader_action=STAY, scenario="grid", **over
 
 # (description, start positions p0 p1 p2 evader, pursuer actions, evader action,
 #  expected positions, captured, collisions, wall bumps)
+# fmt: off
 CASES = [
     ("plain moves", [(1, 1), (3, 1), (1, 3), (4, 4)], [UP, LEFT, RIGHT], DOWN,
      [(1, 2), (2, 1), (2, 3), (4, 3)], False, 0, 0),
     ("capture: pursuer steps onto the evader", [(2, 1), (0, 0), (4, 0), (2, 2)], [UP, UP, UP], STAY,
      [(2, 2), (0, 1), (4, 1), (2, 2)], True, 0, 0),
-    ("capture: evader steps onto a pursuer", [(2, 1), (0, 0), (4, 0), (2, 2)], [STAY, UP, UP], DOWN,
-     [(2, 1), (0, 1), (4, 1), (2, 1)], True, 0, 0),
-    ("capture: both move into the same cell", [(1, 2), (0, 0), (4, 0), (3, 2)], [RIGHT, UP, UP], LEFT,
-     [(2, 2), (0, 1), (4, 1), (2, 2)], True, 0, 0),
+    ("capture: evader steps onto a pursuer", [(2, 1), (0, 0), (4, 0), (2, 2)], [STAY, UP, UP],
+     DOWN, [(2, 1), (0, 1), (4, 1), (2, 1)], True, 0, 0),
+    ("capture: both move into the same cell", [(1, 2), (0, 0), (4, 0), (3, 2)], [RIGHT, UP, UP],
+     LEFT, [(2, 2), (0, 1), (4, 1), (2, 2)], True, 0, 0),
     ("capture: pursuer and evader swap cells", [(2, 1), (0, 0), (4, 0), (2, 2)], [UP, UP, UP], DOWN,
      [(2, 2), (0, 1), (4, 1), (2, 1)], True, 0, 0),
     ("no capture: evader steps away as pursuer follows", [(2, 1), (0, 0), (4, 0), (2, 2)],
      [UP, UP, UP], UP, [(2, 2), (0, 1), (4, 1), (2, 3)], False, 0, 0),
-    ("collision: two pursuers end on one cell", [(1, 1), (3, 1), (0, 4), (4, 4)], [RIGHT, LEFT, DOWN],
-     STAY, [(2, 1), (2, 1), (0, 3), (4, 4)], False, 1, 0),
+    ("collision: two pursuers end on one cell", [(1, 1), (3, 1), (0, 4), (4, 4)],
+     [RIGHT, LEFT, DOWN], STAY, [(2, 1), (2, 1), (0, 3), (4, 4)], False, 1, 0),
     ("collision: two pursuers swap cells", [(1, 1), (2, 1), (0, 4), (4, 4)], [RIGHT, LEFT, DOWN],
      STAY, [(2, 1), (1, 1), (0, 3), (4, 4)], False, 1, 0),
     ("collision: a pursuer walks onto one blocked by the wall", [(0, 0), (1, 0), (4, 4), (2, 2)],
@@ -52,9 +55,10 @@ CASES = [
      STAY, [(2, 2), (2, 2), (2, 2), (4, 4)], False, 3, 0),
     ("capture and collision in the same step", [(1, 2), (3, 2), (0, 0), (2, 2)],
      [RIGHT, LEFT, UP], STAY, [(2, 2), (2, 2), (0, 1), (2, 2)], True, 1, 0),
-    ("swap and same-cell collisions together", [(1, 1), (2, 1), (3, 1), (4, 4)], [RIGHT, LEFT, LEFT],
-     STAY, [(2, 1), (1, 1), (2, 1), (4, 4)], False, 2, 0),
+    ("swap and same-cell collisions together", [(1, 1), (2, 1), (3, 1), (4, 4)],
+     [RIGHT, LEFT, LEFT], STAY, [(2, 1), (1, 1), (2, 1), (4, 4)], False, 2, 0),
 ]
+# fmt: on
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
@@ -99,7 +103,7 @@ def episode(scenario, positions, joint_actions, **overrides):
     env.reset(seed=0, options={"positions": positions})
     steps = []
     for joint in joint_actions:
-        obs, rew, term, trunc, info = env.step(dict(zip(env.possible_agents, joint)))
+        _, rew, term, trunc, info = env.step(dict(zip(env.possible_agents, joint, strict=True)))
         steps.append((rew["pursuer_0"], term["pursuer_0"], trunc["pursuer_0"], info["pursuer_0"]))
         if not env.agents:
             break
@@ -130,13 +134,17 @@ def test_collision_mode_penalize_goes_on_and_penalises_each_overlapping_step():
 
 def test_capture_reward_and_termination():
     steps = episode(
-        "grid", {**MEET, "evader": (1, 2)}, [(UP, STAY, STAY)], actions=5, **{"rewards.capture": 10.0}
+        "grid",
+        {**MEET, "evader": (1, 2)},
+        [(UP, STAY, STAY)],
+        actions=5,
+        **{"rewards.capture": 10.0},
     )
     assert steps == [(9.0, True, False, steps[0][3])] and steps[0][3]["captured"]
 
 
 def test_wall_reward():
-    (r, *_), = episode("grid", MEET, [(STAY, STAY, UP)], actions=5, **{"rewards.wall": -0.5})
+    ((r, *_),) = episode("grid", MEET, [(STAY, STAY, UP)], actions=5, **{"rewards.wall": -0.5})
     assert r == -1.5
 
 

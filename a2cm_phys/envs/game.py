@@ -37,9 +37,13 @@ class Game:
         options = dict(options or {})
         positions = options.pop("positions", None)
         if options:  # PettingZoo's API test passes an unknown option: warn, don't fail
-            warnings.warn(f"reset: ignoring unknown option(s) {', '.join(sorted(options))}", stacklevel=3)
+            warnings.warn(
+                f"reset: ignoring unknown option(s) {', '.join(sorted(options))}", stacklevel=3
+            )
         if positions is not None and not isinstance(positions, Mapping):
-            raise ValueError(f"options['positions'] must be a dict agent -> (x, y), got {positions!r}")
+            raise ValueError(
+                f"options['positions'] must be a dict agent -> (x, y), got {positions!r}"
+            )
         self.core.reset(np.array([0]), np.array([episode_seed], dtype=np.uint64), [positions])
         self.last = None
         return episode_seed
@@ -51,7 +55,8 @@ class Game:
         if not checked:
             if actions.shape[1] != len(self.names) or not np.issubdtype(actions.dtype, np.integer):
                 raise ValueError(
-                    f"expected {len(self.names)} integer actions (one per pursuer), got {joint_action!r}"
+                    f"expected {len(self.names)} integer actions (one per pursuer),"
+                    f" got {joint_action!r}"
                 )
             check_actions(actions, self.scenario.actions, self.names)
         self.last = self.core.step(actions)
@@ -84,5 +89,7 @@ class Game:
             return render_text(self.scenario, positions)
         if mode == "rgb_array":
             velocities = self.core.velocities()
-            return render_rgb(self.scenario, positions, None if velocities is None else velocities[0])
+            return render_rgb(
+                self.scenario, positions, None if velocities is None else velocities[0]
+            )
         return None

@@ -6,7 +6,7 @@ One ``MultiDiscrete`` action holds every pursuer's action; the reward is the tea
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -19,7 +19,7 @@ from .parallel import observation_space
 class PursuitEnv(gym.Env):
     """All pursuers as one agent: ``MultiDiscrete([A] * N)`` actions, the team reward."""
 
-    metadata = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
 
     def __init__(
         self,
@@ -33,7 +33,9 @@ class PursuitEnv(gym.Env):
         self.render_mode = render_mode
         self.game = Game(self.scenario)
         self.observation_space = observation_space(self.scenario)
-        self.action_space = gym.spaces.MultiDiscrete([self.scenario.actions] * self.scenario.pursuers)
+        self.action_space = gym.spaces.MultiDiscrete(
+            [self.scenario.actions] * self.scenario.pursuers
+        )
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium import spaces
@@ -36,7 +36,7 @@ class PursuitParallelEnv:
     in physics mode, ``events`` (the contact events that began in this step).
     """
 
-    metadata = {
+    metadata: ClassVar[dict[str, Any]] = {
         "name": "a2cm_pursuit_v0",
         "render_modes": ["ansi", "rgb_array"],
         "is_parallelizable": True,
