@@ -22,6 +22,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from ..config import CollisionMode, Rewards
+from .core import ends_episode, team_reward
 
 PURSUER_PURSUER = "pursuer_pursuer"
 """Two pursuers touch: one collision for that pair (penalised unless mode is ``off``)."""
@@ -65,6 +66,16 @@ def score_events(events: Iterable[Event], rewards: Rewards, mode: CollisionMode)
     """
     if mode not in ("off", "terminate", "penalize"):
         raise ValueError(f"unknown collision mode {mode!r}")
+    captured, collisions, wall_contacts = count_events(events)
+    reward = team_reward(rewards, mode, captured, collisions, wall_contacts)
+    terminated = ends_episode(mode, captured, collisions)
+    return StepScore(float(reward), bool(terminated), captured, collisions, wall_contacts)
+
+
+def count_events(events: Iterable[Event]) -> tuple[bool, int, int]:
+    """``(captured, collisions, wall_contacts)`` of one game's step: a capture if any
+    pursuer touched the evader, one collision per distinct pursuer pair, one wall contact
+    per distinct pursuer. Raises ``ValueError`` on an unknown kind."""
     captured = False
     pairs: set[tuple[str, str]] = set()
     walls: set[str] = set()
@@ -78,12 +89,7 @@ def score_events(events: Iterable[Event], rewards: Rewards, mode: CollisionMode)
                 walls.add(a)
         else:
             raise ValueError(f"unknown contact event kind {kind!r} (kinds: {', '.join(KINDS)})")
-    collisions, wall_contacts = len(pairs), len(walls)
-    reward = rewards.step + rewards.capture * captured + rewards.wall * wall_contacts
-    if mode != "off":
-        reward += rewards.collision * collisions
-    terminated = captured or (mode == "terminate" and collisions > 0)
-    return StepScore(float(reward), terminated, captured, collisions, wall_contacts)
+    return captured, len(pairs), len(walls)
 
 
 class ContactTracker:

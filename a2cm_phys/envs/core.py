@@ -19,7 +19,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..config import Scenario
+from ..config import CollisionMode, Rewards, Scenario
 
 ACTION_NAMES = ("up", "down", "left", "right", "stay")
 """Discrete actions (SPEC §1): 0 up (+y), 1 down (−y), 2 left (−x), 3 right (+x), 4 stay."""
@@ -46,6 +46,29 @@ class StepOutcome:
     events: list[list[tuple[str, str, str, int]]] | None = None
 
 
+def team_reward(rewards: Rewards, mode: CollisionMode, captured, collisions, wall_contacts):
+    """The team reward of a step (SPEC §4), for scalars or arrays alike.
+
+    ``step + collision × collisions + capture × captured + wall × wall_contacts``, where
+    collisions cost nothing in ``off`` mode. Zero-weight terms are skipped (a scalar may
+    come back when every weight but ``step`` is zero).
+    """
+    reward = rewards.step
+    for weight, count in (
+        (rewards.collision if mode != "off" else 0.0, collisions),
+        (rewards.capture, captured),
+        (rewards.wall, wall_contacts),
+    ):
+        if weight:
+            reward = reward + weight * count
+    return reward
+
+
+def ends_episode(mode: CollisionMode, captured, collisions):
+    """Termination (SPEC §4): capture, or any collision in ``terminate`` mode."""
+    return captured | (collisions > 0) if mode == "terminate" else captured
+
+
 def settle(
     scenario: Scenario,
     t: np.ndarray,
@@ -60,17 +83,11 @@ def settle(
     ``t`` is the step counter after the step. In ``off`` mode collisions are counted but
     neither penalised nor terminal; in ``terminate`` mode any collision ends the episode.
     """
-    rw, mode = scenario.rewards, scenario.collisions.mode
-    reward = np.full(len(t), rw.step)
-    if mode != "off" and rw.collision:
-        reward += rw.collision * collisions
-    if rw.capture:
-        reward += rw.capture * captured
-    if rw.wall:
-        reward += rw.wall * wall_contacts
-    terminated = captured | (collisions > 0) if mode == "terminate" else captured
+    mode = scenario.collisions.mode
+    reward = team_reward(scenario.rewards, mode, captured, collisions, wall_contacts)
+    terminated = ends_episode(mode, captured, collisions)
     return StepOutcome(
-        reward=reward,
+        reward=np.full(len(t), reward) if np.ndim(reward) == 0 else reward,
         terminated=terminated,
         truncated=(t >= scenario.max_steps) & ~terminated,
         captured=captured,

@@ -38,9 +38,16 @@ from .contacts import (
     PURSUER_PURSUER,
     ContactTracker,
     Pair,
-    score_events,
+    count_events,
 )
-from .core import ACTION_DELTAS, StepOutcome, agent_names, default_start, parse_positions
+from .core import (
+    ACTION_DELTAS,
+    StepOutcome,
+    agent_names,
+    default_start,
+    parse_positions,
+    settle,
+)
 from .evader import STAY, evader_actions
 
 
@@ -313,28 +320,14 @@ class PhysicsCore:
         return self._score(events, evader)
 
     def _score(self, events: list[list], evader: np.ndarray) -> StepOutcome:
-        sc, b = self.scenario, self.num_envs
-        reward = np.full(b, sc.rewards.step, dtype=np.float64)
-        terminated = np.zeros(b, dtype=bool)
+        b = self.num_envs
         captured = np.zeros(b, dtype=bool)
         collisions = np.zeros(b, dtype=np.int64)
         walls = np.zeros(b, dtype=np.int64)
         for g, game_events in enumerate(events):
-            if game_events:  # no events score rewards.step and nothing else
-                s = score_events(game_events, sc.rewards, sc.collisions.mode)
-                reward[g], terminated[g], captured[g] = s.reward, s.terminated, s.captured
-                collisions[g], walls[g] = s.collisions, s.wall_contacts
-        truncated = (self.t >= sc.max_steps) & ~terminated
-        return StepOutcome(
-            reward=reward,
-            terminated=terminated,
-            truncated=truncated,
-            captured=captured,
-            collisions=collisions,
-            wall_contacts=walls,
-            evader_action=evader,
-            events=events,
-        )
+            if game_events:  # most steps of most games have no new contact
+                captured[g], collisions[g], walls[g] = count_events(game_events)
+        return settle(self.scenario, self.t, captured, collisions, walls, evader, events)
 
     # ------------------------------------------------------------------ views
 
