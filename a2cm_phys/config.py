@@ -10,6 +10,7 @@ names the source (file) and the dotted key at fault.
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 import types
 import typing
@@ -223,6 +224,8 @@ def _coerce(value: Any, hint: Any, key: str) -> Any:
     if hint is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise _KeyError(key, f"must be a number, got {value!r}")
+        if not math.isfinite(value):
+            raise _KeyError(key, f"must be a finite number, got {value!r}")
         return float(value)
     if hint is int:
         if isinstance(value, bool) or not isinstance(value, int):

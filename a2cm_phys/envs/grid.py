@@ -158,3 +158,24 @@ class GridCore:
     def velocities(self) -> None:
         """Grid agents have no velocity."""
         return None
+
+    def state(self) -> dict[str, np.ndarray]:
+        """Copies of the arrays that define every running game (for checkpoints).
+
+        The evader's randomness is a function of ``episode_seed`` and ``t``, so these three
+        arrays continue every game exactly.
+        """
+        return {
+            "cells": self.cells.copy(),
+            "t": self.t.copy(),
+            "episode_seed": self.episode_seed.copy(),
+        }
+
+    def load_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restore what :meth:`state` returned (same scenario and ``num_envs``)."""
+        cells = np.asarray(state["cells"], dtype=self.cells.dtype)
+        if cells.shape != self.cells.shape:
+            raise ValueError(f"state: cells of shape {cells.shape}, expected {self.cells.shape}")
+        self.cells = cells.copy()
+        self.t = np.asarray(state["t"], dtype=np.int64).copy()
+        self.episode_seed = np.asarray(state["episode_seed"], dtype=np.uint64).copy()

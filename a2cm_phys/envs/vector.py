@@ -7,7 +7,9 @@ finished episode's final observation (``final_obs``, for the truncation bootstra
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -80,6 +82,35 @@ class VectorEnv:
         self._return[envs] = 0.0
         self._collisions[envs] = 0
         self._walls[envs] = 0
+
+    def state(self) -> dict[str, Any]:
+        """A copy of everything that decides the games' future (for checkpoints).
+
+        The core's own state when it has one (grid: exact); otherwise ``None``, and
+        :meth:`load_state` restarts every game with fresh episodes (a physics run then
+        resumes deterministically, but not exactly as the uninterrupted run would go on).
+        """
+        core_state = getattr(self.core, "state", None)
+        return {
+            "core": core_state() if core_state is not None else None,
+            "seeds": self._seeds.bit_generator.state,
+            "return": self._return.copy(),
+            "collisions": self._collisions.copy(),
+            "walls": self._walls.copy(),
+        }
+
+    def load_state(self, state: Mapping[str, Any]) -> np.ndarray:
+        """Restore what :meth:`state` returned; return the observations to act on next."""
+        self._seeds = np.random.default_rng()
+        self._seeds.bit_generator.state = state["seeds"]
+        if state["core"] is not None and hasattr(self.core, "load_state"):
+            self.core.load_state(state["core"])
+            self._return[:] = state["return"]
+            self._collisions[:] = state["collisions"]
+            self._walls[:] = state["walls"]
+        else:
+            self._start(np.arange(self.num_envs))
+        return self.core.observe()
 
     def episode_seeds(self) -> np.ndarray:
         """The episode seed of the episode running in each game."""

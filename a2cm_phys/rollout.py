@@ -1,0 +1,67 @@
+"""Collect a time-major batch from a :class:`~a2cm_phys.envs.vector.VectorEnv` with a policy.
+
+The batch is a dict of preallocated numpy arrays keyed as the learner reads them
+(:data:`~a2cm_phys.algos.learner.BATCH_KEYS`); :func:`collect` overwrites it in place each
+update, so the rollout loop allocates nothing of its own.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from .envs.vector import EpisodeSummary, VecStep, VectorEnv
+
+Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
+"""``policy(obs (B, obs_dim), rng) -> actions (B, N)`` int64."""
+
+StepHook = Callable[[np.ndarray, VecStep], None]
+"""``hook(actions, step)``, called after every vector step (e.g. the episode recorder)."""
+
+
+def allocate_batch(steps: int, num_envs: int, obs_dim: int, n_agents: int) -> dict[str, np.ndarray]:
+    """Zeroed arrays for ``steps`` vector steps of ``num_envs`` games (time-major)."""
+    return {
+        "obs": np.zeros((steps, num_envs, obs_dim), dtype=np.float32),
+        "actions": np.zeros((steps, num_envs, n_agents), dtype=np.int64),
+        "rewards": np.zeros((steps, num_envs), dtype=np.float64),
+        "terminated": np.zeros((steps, num_envs), dtype=bool),
+        "truncated": np.zeros((steps, num_envs), dtype=bool),
+        "final_obs": np.zeros((steps, num_envs, obs_dim), dtype=np.float32),
+        "next_obs": np.zeros((num_envs, obs_dim), dtype=np.float32),
+    }
+
+
+def collect(
+    env: VectorEnv,
+    policy: Policy,
+    obs: np.ndarray,
+    rng: np.random.Generator,
+    batch: dict[str, np.ndarray],
+    on_step: StepHook | None = None,
+) -> tuple[np.ndarray, list[EpisodeSummary]]:
+    """Step ``env`` ``len(batch["obs"])`` times from ``obs``, writing into ``batch``.
+
+    Returns the observations after the last step (also stored as ``batch["next_obs"]``) and
+    the episodes that finished meanwhile, in order. ``rng`` is the policy's only randomness.
+    """
+    b_obs, b_actions, b_rewards = batch["obs"], batch["actions"], batch["rewards"]
+    b_term, b_trunc, b_final = batch["terminated"], batch["truncated"], batch["final_obs"]
+    episodes: list[EpisodeSummary] = []
+    for t in range(len(b_obs)):
+        b_obs[t] = obs
+        actions = policy(obs, rng)
+        step = env.step(actions, validate=False)
+        b_actions[t] = actions
+        b_rewards[t] = step.reward
+        b_term[t] = step.terminated
+        b_trunc[t] = step.truncated
+        b_final[t] = step.final_obs
+        if step.episodes:
+            episodes.extend(step.episodes)
+        if on_step is not None:
+            on_step(actions, step)
+        obs = step.obs
+    batch["next_obs"][:] = obs
+    return obs, episodes
