@@ -138,10 +138,11 @@ class Train:
     max_grad_norm: float = 0.0
     device: str = "cpu"
     threads: int = 1
+    workers: int = 1  # physics mode: processes stepping the games (grid ignores it)
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of the first impossible value."""
-        for key in ("updates", "batch_size", "num_envs", "hidden", "threads"):
+        for key in ("updates", "batch_size", "num_envs", "hidden", "threads", "workers"):
             if getattr(self, key) < 1:
                 raise _KeyError(key, f"must be >= 1, got {getattr(self, key)}")
         if self.batch_size % self.num_envs:

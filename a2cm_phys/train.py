@@ -106,7 +106,7 @@ class Trainer:
         self.record, self.log_every, self.scene_every = record, log_every, scene_every
         self.progress = progress
         self.checkpoint_seconds, self.checkpoint_every = checkpoint_seconds, checkpoint_every
-        self.env = VectorEnv(scenario, cfg.num_envs)
+        self.env = VectorEnv(scenario, cfg.num_envs, workers=cfg.workers)
         self.model = make_model(cfg, scenario)
         self.learner = Learner(self.model, cfg)
         self.rng = policy_rng(cfg.seed)
@@ -169,6 +169,10 @@ class Trainer:
         trainer = cls(scenario, cfg, run_dir, **kwargs)
         trainer.load_checkpoint_state(state)
         return trainer
+
+    def close(self) -> None:
+        """Release the environment (stops physics worker processes, if any)."""
+        self.env.close()
 
     def wall_time(self) -> float:
         """Seconds spent training in this run, over all sessions."""
@@ -375,7 +379,7 @@ class _Progress:
 
 _TRAIN_FLAGS = (
     "algo", "num_envs", "updates", "batch_size", "seed", "lr",
-    "reward_scale", "max_grad_norm", "device", "threads",
+    "reward_scale", "max_grad_norm", "device", "threads", "workers",
 )  # fmt: skip
 
 
@@ -396,6 +400,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-grad-norm", type=float, help="0 disables clipping")
     p.add_argument("--device")
     p.add_argument("--threads", type=int, help="torch threads (default 1)")
+    p.add_argument("--workers", type=int, help="physics: processes stepping the games (1)")
     p.add_argument(
         "--set",
         action="append",
@@ -502,7 +507,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(f"run directory: {trainer.run_dir}", file=sys.stderr)
-    status = trainer.run()
+    try:
+        status = trainer.run()
+    finally:
+        trainer.close()
     _print_summary(trainer.last_summary)
     resume = f"python -m a2cm_phys.train --resume {shlex.quote(str(trainer.run_dir))}"
     if status == "interrupted":

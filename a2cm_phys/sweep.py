@@ -1,0 +1,340 @@
+"""Sweeps of scenarios × algorithms × seeds, each run a Ray task (or sequential without Ray).
+
+    python -m a2cm_phys.sweep --scenarios grid,grid_collision --algos a2c,a2cm --seeds 0-4
+
+Each run is exactly ``python -m a2cm_phys.train`` with that scenario, algorithm and seed,
+written to its own run directory ``<sweep-dir>/<scenario>-<algo>-s<seed>/`` (config,
+checkpoint, MCAP log, summary), so a sweep's numbers equal those of the runs done one by
+one. Re-running a sweep skips finished runs and resumes unfinished ones from their
+checkpoints; a failing run is retried once and reported while the others go on.
+Without ``--address`` Ray starts locally on this machine's cores; ``--address auto`` or
+``ray://host:10001`` uses an existing cluster. Without Ray installed (``pip install -e
+".[cluster]"``) the runs go one after another in this process.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import shlex
+import sys
+import traceback
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from . import checkpoint
+from .config import ConfigError, load_scenario, load_train, parse_assignments
+from .stats import t_interval
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One training run of a sweep: scenario, algorithm, seed and shared options."""
+
+    scenario: str
+    algo: str
+    seed: int
+    train: dict[str, Any] = field(default_factory=dict)  # Train overrides shared by all runs
+    overrides: dict[str, Any] = field(default_factory=dict)  # scenario overrides
+    record: bool = True
+    log_every: int = 1
+
+    @property
+    def name(self) -> str:
+        """The run directory's name."""
+        return f"{Path(self.scenario).stem}-{self.algo}-s{self.seed}"
+
+    def command(self, run_dir: Path) -> str:
+        """The equivalent ``train`` command line (for the record)."""
+        argv = [
+            "python",
+            "-m",
+            "a2cm_phys.train",
+            "--scenario",
+            self.scenario,
+            "--algo",
+            self.algo,
+            "--seed",
+            str(self.seed),
+            "--run-dir",
+            str(run_dir),
+        ]
+        argv += [f"--set=train.{k}={v}" for k, v in self.train.items()]
+        argv += [f"--set={k}={v}" for k, v in self.overrides.items()]
+        return shlex.join(argv)
+
+
+def run_state(run_dir: Path) -> str:
+    """``done`` (summary of a finished run), ``partial`` (a checkpoint) or ``new``."""
+    summary = run_dir / "summary.json"
+    if summary.exists():
+        try:
+            if json.loads(summary.read_text()).get("status") == "done":
+                return "done"
+        except (OSError, json.JSONDecodeError):
+            pass
+    return "partial" if (run_dir / checkpoint.CHECKPOINT_NAME).exists() else "new"
+
+
+def execute(spec: RunSpec, sweep_dir: str) -> dict[str, Any]:
+    """Run (or resume, or skip) one run; returns its summary. Runs inside a Ray task."""
+    from .train import Trainer, write_config
+
+    run_dir = Path(sweep_dir) / spec.name
+    state = run_state(run_dir)
+    if state == "done":
+        return {**json.loads((run_dir / "summary.json").read_text()), "sweep": "skipped"}
+    options = {"record": spec.record, "log_every": spec.log_every, "progress": False}
+    if state == "partial":
+        trainer = Trainer.resume(run_dir, **options)
+    else:
+        scenario = load_scenario(spec.scenario, spec.overrides)
+        cfg = load_train({**spec.train, "algo": spec.algo, "seed": spec.seed})
+        run_dir.mkdir(parents=True, exist_ok=True)
+        write_config(run_dir, scenario, cfg, spec.command(run_dir))
+        trainer = Trainer(scenario, cfg, run_dir, **options)
+    try:
+        status = trainer.run()
+    finally:
+        trainer.close()
+    if status != "done":
+        raise RuntimeError(f"{spec.name}: training stopped ({status}) {trainer.stop_reason}")
+    return {**trainer.last_summary, "sweep": "resumed" if state == "partial" else "ran"}
+
+
+@dataclass
+class Outcome:
+    """What became of one run: its summary, or the error it failed with."""
+
+    spec: RunSpec
+    summary: dict[str, Any] | None = None
+    error: str | None = None
+    attempts: int = 1
+
+
+def run_sequential(
+    specs: Sequence[RunSpec], sweep_dir: Path, on_done: Callable[[Outcome], None]
+) -> list[Outcome]:
+    """Run the specs one by one in this process, retrying each failure once."""
+    outcomes = []
+    for spec in specs:
+        outcome = Outcome(spec)
+        for attempt in (1, 2):
+            outcome.attempts = attempt
+            try:
+                outcome.summary, outcome.error = execute(spec, str(sweep_dir)), None
+                break
+            except KeyboardInterrupt:
+                raise
+            except Exception as err:  # a run's failure must not stop the sweep
+                outcome.error = f"{type(err).__name__}: {err}"
+                tb = traceback.format_exc(limit=3)
+                (sweep_dir / f"{spec.name}.error.txt").write_text(tb)
+        outcomes.append(outcome)
+        on_done(outcome)
+    return outcomes
+
+
+def run_on_ray(
+    specs: Sequence[RunSpec],
+    sweep_dir: Path,
+    on_done: Callable[[Outcome], None],
+    address: str | None,
+    cpus_per_run: float,
+) -> list[Outcome]:
+    """Run each spec as a Ray task (retried once on error or worker death)."""
+    import ray
+
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    task = ray.remote(num_cpus=cpus_per_run, max_retries=1, retry_exceptions=True)(execute)
+    pending = {task.remote(spec, str(sweep_dir.resolve())): spec for spec in specs}
+    outcomes = []
+    try:
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            spec = pending.pop(ready[0])
+            outcome = Outcome(spec, attempts=0)
+            try:
+                outcome.summary = ray.get(ready[0])
+            except Exception as err:  # RayTaskError wraps the run's exception
+                cause = getattr(err, "cause", None) or err
+                outcome.error, outcome.attempts = f"{type(cause).__name__}: {cause}", 2
+            outcomes.append(outcome)
+            on_done(outcome)
+    except KeyboardInterrupt:
+        for ref in pending:  # running tasks get a KeyboardInterrupt: they checkpoint
+            ray.cancel(ref)
+        raise
+    return outcomes
+
+
+def summarise(outcomes: Iterable[Outcome]) -> list[dict[str, Any]]:
+    """Per scenario × algorithm: mean ± 95% CI (Student t across seeds) of episodes
+    completed and final mean episode length."""
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for o in outcomes:
+        if o.summary is not None:
+            groups.setdefault((Path(o.spec.scenario).stem, o.spec.algo), []).append(o.summary)
+    rows = []
+    for (scenario, algo), runs in sorted(groups.items()):
+        row: dict[str, Any] = {"scenario": scenario, "algo": algo, "seeds": len(runs)}
+        for key in ("episodes", "mean_length_last_1000", "collisions_per_episode", "wall_time_s"):
+            mean, half = t_interval([r[key] for r in runs])
+            row[key], row[f"{key}_ci95"] = mean, half
+        rows.append(row)
+    return rows
+
+
+def write_summary(rows: list[dict[str, Any]], outcomes: list[Outcome], sweep_dir: Path) -> None:
+    """Save the table as ``sweep_summary.csv`` and, with every run's fate, ``.json``."""
+    if rows:
+        with open(sweep_dir / "sweep_summary.csv", "w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+    runs = [
+        {
+            "run": o.spec.name,
+            "error": o.error,
+            "attempts": o.attempts,
+            "summary": o.summary,
+            "spec": asdict(o.spec),
+        }
+        for o in outcomes
+    ]
+    (sweep_dir / "sweep_summary.json").write_text(
+        json.dumps({"table": rows, "runs": runs}, indent=2, default=str) + "\n"
+    )
+
+
+def format_table(rows: list[dict[str, Any]]) -> str:
+    """The summary as a markdown table."""
+    lines = [
+        "| scenario | algo | seeds | episodes | mean length (last 1,000) |",
+        "|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['scenario']} | {r['algo']} | {r['seeds']} | {r['episodes']:,.0f} ± "
+            f"{r['episodes_ci95']:,.0f} | {r['mean_length_last_1000']:.2f} ± "
+            f"{r['mean_length_last_1000_ci95']:.2f} |"
+        )
+    return "\n".join(lines)
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``0-4`` → 0..4; ``1,3,7`` → those; both may mix (``0-2,9``)."""
+    seeds: list[int] = []
+    try:
+        for part in text.split(","):
+            lo, _, hi = part.strip().partition("-")
+            seeds += range(int(lo), int(hi) + 1) if hi else [int(lo)]
+    except ValueError:
+        raise ConfigError(f"--seeds: '{text}' is not like 0-4 or 1,3,7") from None
+    if not seeds:
+        raise ConfigError("--seeds: no seed given")
+    return seeds
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``python -m a2cm_phys.sweep`` argument parser."""
+    p = argparse.ArgumentParser(
+        prog="python -m a2cm_phys.sweep", description=__doc__.split("\n")[0]
+    )
+    p.add_argument("--scenarios", required=True, help="comma-separated scenario names or paths")
+    p.add_argument("--algos", default="a2c,a2cm", help="comma-separated: a2c, a2cm")
+    p.add_argument("--seeds", default="0-4", help="e.g. 0-4 or 1,3,7")
+    p.add_argument("--sweep-dir", default="logs/sweep", help="where the run directories go")
+    p.add_argument("--address", help="Ray cluster address (auto, ray://host:10001)")
+    p.add_argument("--cpus-per-run", type=float, default=1.0)
+    p.add_argument("--sequential", action="store_true", help="no Ray, even if installed")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="scenario override, or train.KEY=VALUE (e.g. train.updates=500)",
+    )
+    p.add_argument("--no-record", action="store_true", help="no MCAP episode logs")
+    p.add_argument("--log-every", type=int, default=1)
+    return p
+
+
+def plan(args: argparse.Namespace) -> list[RunSpec]:
+    """The runs of a sweep, validated before anything starts."""
+    assignments = parse_assignments(args.set)
+    train = {k[6:]: v for k, v in assignments.items() if k.startswith("train.")}
+    overrides = {k: v for k, v in assignments.items() if not k.startswith("train.")}
+    scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
+    algos = [a.strip() for a in args.algos.split(",") if a.strip()]
+    specs = []
+    for scenario in scenarios:
+        load_scenario(scenario, overrides)
+        for algo in algos:
+            for seed in parse_seeds(args.seeds):
+                load_train({**train, "algo": algo, "seed": seed})
+                specs.append(
+                    RunSpec(
+                        scenario, algo, seed, train, overrides, not args.no_record, args.log_every
+                    )
+                )
+    return specs
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m a2cm_phys.sweep``; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        specs = plan(args)
+    except ConfigError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    sweep_dir = Path(args.sweep_dir)
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(specs), desc="runs", unit="run", disable=None)
+
+    def on_done(o: Outcome) -> None:
+        what = o.summary.get("sweep", "ran") if o.summary else f"FAILED ({o.error})"
+        bar.write(f"{o.spec.name}: {what}")
+        bar.update()
+
+    use_ray = not args.sequential
+    if use_ray:
+        try:
+            import ray  # noqa: F401
+        except ImportError:
+            use_ray = False
+            print(
+                'Ray is not installed (pip install -e ".[cluster]"): running sequentially',
+                file=sys.stderr,
+            )
+    try:
+        if use_ray:
+            outcomes = run_on_ray(specs, sweep_dir, on_done, args.address, args.cpus_per_run)
+        else:
+            outcomes = run_sequential(specs, sweep_dir, on_done)
+    except KeyboardInterrupt:
+        bar.close()
+        print(
+            "interrupted: finished runs are intact; run the same command to resume", file=sys.stderr
+        )
+        return 130
+    bar.close()
+    rows = summarise(outcomes)
+    write_summary(rows, outcomes, sweep_dir)
+    print(format_table(rows))
+    failed = [o for o in outcomes if o.error]
+    for o in failed:
+        print(f"FAILED {o.spec.name} after {o.attempts} attempts: {o.error}", file=sys.stderr)
+    print(f"summary: {sweep_dir / 'sweep_summary.csv'}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

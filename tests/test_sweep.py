@@ -1,0 +1,143 @@
+"""Sweeps: Ray and sequential runs equal single train commands; failures are retried and
+reported; a second invocation skips what is done."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from a2cm_phys import sweep
+from a2cm_phys.sweep import RunSpec, run_sequential
+from a2cm_phys.train import main as train_main
+
+TINY = {"updates": 4, "num_envs": 4, "batch_size": 16}
+KEYS = ("episodes", "mean_length_last_1000", "collisions", "steps")
+
+
+def specs(**train):
+    return [
+        RunSpec("grid", algo, seed, {**TINY, **train}, record=False)
+        for algo in ("a2c", "a2cm")
+        for seed in (0, 1)
+    ]
+
+
+def single_run(tmp_path, spec):
+    run_dir = tmp_path / "single" / spec.name
+    argv = [
+        "--scenario",
+        spec.scenario,
+        "--algo",
+        spec.algo,
+        "--seed",
+        str(spec.seed),
+        "--run-dir",
+        str(run_dir),
+        "--no-record",
+        "--no-progress",
+    ]
+    argv += [f"--set=train.{k}={v}" for k, v in spec.train.items()]
+    assert train_main(argv) == 0
+    return json.loads((run_dir / "summary.json").read_text())
+
+
+def same(a, b):
+    return all(a[k] == b[k] for k in KEYS)
+
+
+def test_sequential_sweep_equals_single_runs_and_skips_on_rerun(tmp_path):
+    plan = specs()
+    seen = []
+    outcomes = run_sequential(plan, tmp_path / "sweep", seen.append)
+    assert [o.error for o in outcomes] == [None] * 4 and len(seen) == 4
+    for o in outcomes:
+        assert same(o.summary, single_run(tmp_path, o.spec))
+    again = run_sequential(plan, tmp_path / "sweep", lambda o: None)
+    assert {o.summary["sweep"] for o in again} == {"skipped"}
+
+
+def test_failing_run_is_retried_and_reported_while_others_finish(tmp_path):
+    plan = specs()
+    plan[1] = RunSpec("grid", "a2c", 1, {**TINY, "reward_scale": 1e300}, record=False)
+    outcomes = run_sequential(plan, tmp_path, lambda o: None)
+    failed = [o for o in outcomes if o.error]
+    assert [o.spec.name for o in failed] == [plan[1].name]
+    assert failed[0].attempts == 2 and "nonfinite" in failed[0].error
+    assert all(o.summary["status"] == "done" for o in outcomes if not o.error)
+
+
+def test_an_interrupted_run_is_resumed_not_restarted(tmp_path, monkeypatch):
+    from a2cm_phys.train import Trainer
+
+    spec = specs()[0]
+    original = Trainer._one_update
+
+    def interrupt_at_update_2(self, on_step):
+        if self.update == 2:
+            raise KeyboardInterrupt
+        original(self, on_step)
+
+    monkeypatch.setattr(Trainer, "_one_update", interrupt_at_update_2)
+    argv = [
+        "--scenario",
+        "grid",
+        "--algo",
+        spec.algo,
+        "--seed",
+        "0",
+        "--no-record",
+        "--run-dir",
+        str(tmp_path / spec.name),
+        "--no-progress",
+    ]
+    argv += [f"--set=train.{k}={v}" for k, v in TINY.items()]
+    assert train_main(argv) == 130
+    monkeypatch.setattr(Trainer, "_one_update", original)
+    (outcome,) = run_sequential([spec], tmp_path, lambda o: None)
+    assert outcome.summary["sweep"] == "resumed" and outcome.summary["updates"] == TINY["updates"]
+    assert same(outcome.summary, single_run(tmp_path, spec))
+
+
+def test_cli_summary_table_and_bad_seeds(tmp_path, capsys):
+    args = [
+        "--scenarios",
+        "grid",
+        "--algos",
+        "a2c,a2cm",
+        "--seeds",
+        "0-1",
+        "--sequential",
+        "--sweep-dir",
+        str(tmp_path),
+        "--no-record",
+    ]
+    args += [f"--set=train.{k}={v}" for k, v in TINY.items()]
+    assert sweep.main(args) == 0
+    out = capsys.readouterr().out
+    assert "| grid | a2c | 2 |" in out and "| grid | a2cm | 2 |" in out
+    assert (tmp_path / "sweep_summary.csv").read_text().count("\n") == 3
+    assert sweep.main(["--scenarios", "grid", "--seeds", "x-y"]) == 2
+    assert "--seeds" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield ray
+    ray.shutdown()
+
+
+@pytest.mark.slow
+def test_ray_sweep_equals_sequential_retries_failures_and_skips(tmp_path, local_ray):
+    plan = specs()
+    plan.append(RunSpec("grid", "a2cm", 9, {**TINY, "reward_scale": 1e300}, record=False))
+    outcomes = sweep.run_on_ray(plan, tmp_path / "ray", lambda o: None, None, 1.0)
+    by_name = {o.spec.name: o for o in outcomes}
+    assert by_name[plan[-1].name].error and "nonfinite" in by_name[plan[-1].name].error
+    reference = run_sequential(plan[:-1], tmp_path / "seq", lambda o: None)
+    for ref in reference:
+        assert same(by_name[ref.spec.name].summary, ref.summary)
+    again = sweep.run_on_ray(plan[:-1], tmp_path / "ray", lambda o: None, None, 1.0)
+    assert {o.summary["sweep"] for o in again} == {"skipped"}
