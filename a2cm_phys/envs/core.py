@@ -86,10 +86,12 @@ def settle(
     mode = scenario.collisions.mode
     reward = team_reward(scenario.rewards, mode, captured, collisions, wall_contacts)
     terminated = ends_episode(mode, captured, collisions)
+    truncated = t >= scenario.max_steps
+    truncated &= ~terminated
     return StepOutcome(
-        reward=np.full(len(t), reward) if np.ndim(reward) == 0 else reward,
+        reward=reward if isinstance(reward, np.ndarray) else np.full(len(t), reward),
         terminated=terminated,
-        truncated=(t >= scenario.max_steps) & ~terminated,
+        truncated=truncated,
         captured=captured,
         collisions=collisions,
         wall_contacts=wall_contacts,

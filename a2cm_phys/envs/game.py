@@ -50,8 +50,8 @@ class Game:
 
     def step(self, joint_action: np.ndarray, checked: bool = False) -> StepOutcome:
         """Advance the game with the pursuers' actions ``(N,)``; raises on invalid actions
-        unless the caller has ``checked`` them already."""
-        actions = np.asarray(joint_action).reshape(1, -1)
+        unless the caller has ``checked`` them already (and passes them as ``(1, N)`` int64)."""
+        actions = joint_action if checked else np.asarray(joint_action).reshape(1, -1)
         if not checked:
             if actions.shape[1] != len(self.names) or not np.issubdtype(actions.dtype, np.integer):
                 raise ValueError(

@@ -84,15 +84,13 @@ class PursuitParallelEnv:
         n_actions = self.scenario.actions
         joint = [actions[a] for a in self.agents]
         for agent, value in zip(self.agents, joint, strict=True):
-            if (
-                not isinstance(value, (int, np.integer))
-                or isinstance(value, bool)
-                or not 0 <= value < n_actions
-            ):
+            if type(value) is not int and (  # the common case first: a plain int
+                not isinstance(value, np.integer) or isinstance(value, bool)
+            ) or not 0 <= value < n_actions:
                 raise ValueError(
                     f"invalid action {value!r} for {agent}: expected an integer in [0, {n_actions})"
                 )
-        out = self.game.step(np.array(joint, dtype=np.int64), checked=True)
+        out = self.game.step(np.array([joint], dtype=np.int64), checked=True)
         obs = self.game.observation()
         info = self.game.info()
         reward = float(out.reward[0])
@@ -101,11 +99,11 @@ class PursuitParallelEnv:
         if terminated or truncated:
             self.agents = []
         return (
-            {a: obs for a in agents},
-            {a: reward for a in agents},
-            {a: terminated for a in agents},
-            {a: truncated for a in agents},
-            {a: dict(info) for a in agents},
+            dict.fromkeys(agents, obs),
+            dict.fromkeys(agents, reward),
+            dict.fromkeys(agents, terminated),
+            dict.fromkeys(agents, truncated),
+            {a: info.copy() for a in agents},
         )
 
     def state(self) -> np.ndarray:
