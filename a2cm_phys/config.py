@@ -63,7 +63,14 @@ class Physics:
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of the first impossible value."""
-        for key in ("box_side", "evader_radius", "mass", "max_speed", "wall_thickness", "max_force"):
+        for key in (
+            "box_side",
+            "evader_radius",
+            "mass",
+            "max_speed",
+            "wall_thickness",
+            "max_force",
+        ):
             if not getattr(self, key) > 0:
                 raise _KeyError(f"physics.{key}", f"must be > 0, got {getattr(self, key)!r}")
         if self.box_side >= 1.0:
@@ -96,7 +103,8 @@ class Scenario:
         border = 4 * (self.size - 1)
         if not 1 <= self.pursuers <= border:
             raise _KeyError(
-                "pursuers", f"must be between 1 and {border} (the border cells), got {self.pursuers}"
+                "pursuers",
+                f"must be between 1 and {border} (the border cells), got {self.pursuers}",
             )
         if self.pursuers + 1 > self.size * self.size:
             raise _KeyError("pursuers", "leave no free cell for the evader")
@@ -265,7 +273,9 @@ def parse_assignments(items: Iterable[str], source: str = "--set") -> dict[str, 
 
 def merge_overrides(data: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
     """Return ``data`` updated with ``overrides``; dotted keys and nested dicts both work."""
-    merged: dict[str, Any] = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in data.items()}
+    merged: dict[str, Any] = {
+        k: (dict(v) if isinstance(v, Mapping) else v) for k, v in data.items()
+    }
     for dotted, value in overrides.items():
         *parents, leaf = dotted.split(".")
         table = merged
@@ -335,6 +345,8 @@ def load_scenario(
     return build(Scenario, data, source)
 
 
-def load_train(overrides: Mapping[str, Any] | None = None, source: str = "training options") -> Train:
+def load_train(
+    overrides: Mapping[str, Any] | None = None, source: str = "training options"
+) -> Train:
     """A validated :class:`Train` from the defaults and ``overrides``."""
     return build(Train, dict(overrides or {}), source)

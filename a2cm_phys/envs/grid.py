@@ -60,7 +60,9 @@ class GridRules:
         # pursuer with the evader (row n).
         pairs = list(combinations(range(n), 2)) + [(i, n) for i in range(n)]
         self.n_pairs = len(pairs) - n
-        self.left, self.right = (np.array(side, dtype=np.int64) for side in zip(*pairs, strict=True))
+        self.left, self.right = (
+            np.array(side, dtype=np.int64) for side in zip(*pairs, strict=True)
+        )
         moves = len(self.move)
         self.meets: np.ndarray | None = None
         if moves <= self.MEET_TABLE_LIMIT:

@@ -84,9 +84,9 @@ class PursuitParallelEnv:
         n_actions = self.scenario.actions
         joint = [actions[a] for a in self.agents]
         for agent, value in zip(self.agents, joint, strict=True):
-            if type(value) is not int and (  # the common case first: a plain int
-                not isinstance(value, np.integer) or isinstance(value, bool)
-            ) or not 0 <= value < n_actions:
+            plain = type(value) is int  # the common case, checked first
+            integer = plain or (isinstance(value, np.integer) and not isinstance(value, bool))
+            if not integer or not 0 <= value < n_actions:
                 raise ValueError(
                     f"invalid action {value!r} for {agent}: expected an integer in [0, {n_actions})"
                 )
