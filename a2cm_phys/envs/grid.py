@@ -129,9 +129,8 @@ class GridCore:
         names = agent_names(self.scenario)
         for a, b in combinations(range(len(names)), 2):
             if np.array_equal(xy[a], xy[b]):
-                raise ValueError(
-                    f"positions: {names[a]} and {names[b]} overlap at {tuple(int(v) for v in xy[a])}"
-                )
+                cell = tuple(int(v) for v in xy[a])
+                raise ValueError(f"positions: {names[a]} and {names[b]} overlap at {cell}")
         return xy[:, 0] + self.scenario.size * xy[:, 1]
 
     def step(self, actions: np.ndarray) -> StepOutcome:
