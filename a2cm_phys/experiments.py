@@ -29,7 +29,7 @@ import numpy as np
 
 from .config import ConfigError, load_train
 from .stats import t_interval
-from .sweep import Outcome, RunSpec, run_on_ray, run_sequential
+from .sweep import Outcome, RunSpec, run_all
 
 EXPERIMENTS = {
     1: ("no collision", {"grid": "grid", "physics": "phys"}),
@@ -280,16 +280,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{o.spec.name}: {what}", file=sys.stderr, flush=True)
 
     try:
-        import ray  # noqa: F401
-
-        use_ray = not args.sequential
-    except ImportError:
-        use_ray = False
-    try:
-        if use_ray:
-            outcomes = run_on_ray(specs, sweep_dir, done, args.address, 1.0)
-        else:
-            outcomes = run_sequential(specs, sweep_dir, done)
+        outcomes, use_ray = run_all(specs, sweep_dir, done, args.address, 1.0, args.sequential)
     except KeyboardInterrupt:
         print("interrupted: finished runs are kept; run the same command to go on", file=sys.stderr)
         return 130

@@ -172,6 +172,31 @@ def run_on_ray(
     return outcomes
 
 
+def run_all(
+    specs: Sequence[RunSpec],
+    sweep_dir: Path,
+    on_done: Callable[[Outcome], None],
+    address: str | None = None,
+    cpus_per_run: float = 1.0,
+    sequential: bool = False,
+) -> tuple[list[Outcome], bool]:
+    """Run the specs on Ray when it is installed (and not ``sequential``), else one by one
+    in this process, saying so; returns the outcomes and whether Ray ran them."""
+    use_ray = not sequential
+    if use_ray:
+        try:
+            import ray  # noqa: F401
+        except ImportError:
+            use_ray = False
+            print(
+                'Ray is not installed (pip install -e ".[cluster]"): running sequentially',
+                file=sys.stderr,
+            )
+    if use_ray:
+        return run_on_ray(specs, sweep_dir, on_done, address, cpus_per_run), True
+    return run_sequential(specs, sweep_dir, on_done), False
+
+
 def summarise(outcomes: Iterable[Outcome]) -> list[dict[str, Any]]:
     """Per scenario × algorithm: mean ± 95% CI (Student t across seeds) of episodes
     completed and final mean episode length."""
@@ -304,21 +329,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         bar.write(f"{o.spec.name}: {what}")
         bar.update()
 
-    use_ray = not args.sequential
-    if use_ray:
-        try:
-            import ray  # noqa: F401
-        except ImportError:
-            use_ray = False
-            print(
-                'Ray is not installed (pip install -e ".[cluster]"): running sequentially',
-                file=sys.stderr,
-            )
     try:
-        if use_ray:
-            outcomes = run_on_ray(specs, sweep_dir, on_done, args.address, args.cpus_per_run)
-        else:
-            outcomes = run_sequential(specs, sweep_dir, on_done)
+        outcomes, _ = run_all(
+            specs, sweep_dir, on_done, args.address, args.cpus_per_run, args.sequential
+        )
     except KeyboardInterrupt:
         bar.close()
         print(

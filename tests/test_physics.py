@@ -5,13 +5,9 @@ from __future__ import annotations
 
 from functools import partial
 
-import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_env
-from pettingzoo.test import parallel_api_test, parallel_seed_test
 
-import a2cm_phys
 from a2cm_phys import make_env
 from a2cm_phys.config import load_scenario, scenario_names
 from a2cm_phys.envs import physics
@@ -309,22 +305,3 @@ def test_process_core_reports_bad_positions_and_worker_death():
             core.step(np.zeros((4, sc.pursuers), dtype=np.int64))
     finally:
         core.close()
-
-
-# --------------------------------------------------------------------------- API suites
-
-
-@pytest.mark.parametrize("scenario", PHYS)
-def test_pettingzoo_parallel_api(scenario):
-    parallel_api_test(make_env(scenario, max_steps=60), num_cycles=200)
-
-
-@pytest.mark.parametrize("scenario", PHYS)
-def test_pettingzoo_seed(scenario):
-    parallel_seed_test(lambda: make_env(scenario, max_steps=60), num_cycles=100)
-
-
-@pytest.mark.parametrize("scenario", PHYS)
-def test_gymnasium_env_checker(scenario):
-    env = gym.make(a2cm_phys.GYM_ID, scenario=scenario, max_steps=60)
-    check_env(env.unwrapped, skip_render_check=True)

@@ -26,6 +26,7 @@ from ..config import ConfigError, Scenario, build
 from .schemas import (
     METADATA_NAME,
     SCENE_TOPIC_PREFIX,
+    SUMMARY_SCHEMA,
     SUMMARY_TOPIC,
     TRAJECTORY_TOPIC,
     UPDATE_TOPIC,
@@ -101,20 +102,7 @@ class Trajectory:
         return out
 
 
-SUMMARY_FIELDS = (
-    "episode",
-    "env",
-    "length",
-    "return",
-    "captured",
-    "truncated",
-    "collision_terminated",
-    "collisions",
-    "wall_contacts",
-    "t0",
-    "t1",
-    "logged",
-)
+SUMMARY_FIELDS = tuple(k for k in SUMMARY_SCHEMA["required"] if k != "seed")
 """Columns of :attr:`RunLog.episodes` besides ``seed``."""
 
 
