@@ -322,19 +322,23 @@ def open_recorder(trainer: Trainer) -> Any:
         from .record.writer import EpisodeRecorder
     except ImportError:  # the record package is optional for training
         return None
-    if trainer.update > 0:
-        # EpisodeRecorder.start cannot begin with games mid-episode yet (it reports "out of
-        # sync" when the first of them ends), so a resumed session is not logged for now.
-        print("note: the episode log is not continued after --resume", file=sys.stderr)
-        return None
+    # A resumed session continues the log in a file of its own (the first one was closed, or
+    # cut short by a crash), on the same clock and episode ids; the games caught mid-episode
+    # get a summary without a trajectory.
+    name = f"episodes-from-{trainer.update:06d}.mcap" if trainer.update else "episodes.mcap"
     recorder = EpisodeRecorder(
-        trainer.run_dir / "episodes.mcap",
+        trainer.run_dir / name,
         trainer.scenario,
         {"train": to_dict(trainer.cfg)},
         log_every=trainer.log_every,
         scene_every=trainer.scene_every,
     )
-    recorder.start(trainer.env, trainer.obs)
+    recorder.start(
+        trainer.env,
+        trainer.obs,
+        step=trainer.update * trainer.cfg.steps_per_env,
+        episode=trainer.stats.episodes,
+    )
     return recorder
 
 

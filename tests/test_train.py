@@ -242,3 +242,32 @@ def test_physics_resume_restarts_games_deterministically(tmp_path: Path) -> None
     for path in (run_dir, copy):
         assert main(["--resume", str(path), "--updates", "4", "--no-progress"]) == 0
     _assert_same_run(run_dir, copy)
+
+
+def test_a_resumed_run_continues_its_episode_log(tmp_path, monkeypatch):
+    """Every episode of an interrupted and resumed run has a summary in the run's logs."""
+    from a2cm_phys.plot import log_files
+    from a2cm_phys.record import read_run
+    from a2cm_phys.train import Trainer
+    from a2cm_phys.train import main as train_main
+
+    original = Trainer._one_update
+
+    def interrupt_at_update_6(self, on_step):
+        if self.update == 6:
+            raise KeyboardInterrupt
+        original(self, on_step)
+
+    run_dir = tmp_path / "run"
+    argv = ["--scenario", "grid", "--num-envs", "4", "--updates", "12", "--run-dir",
+            str(run_dir), "--no-progress"]  # fmt: skip
+    monkeypatch.setattr(Trainer, "_one_update", interrupt_at_update_6)
+    assert train_main(argv) == 130
+    monkeypatch.setattr(Trainer, "_one_update", original)
+    assert train_main(["--resume", str(run_dir), "--no-progress"]) == 0
+    logs = [read_run(f) for f in log_files(run_dir)]
+    assert [f.name for f in log_files(run_dir)] == ["episodes.mcap", "episodes-from-000006.mcap"]
+    ids = [int(i) for lg in logs for i in lg.episodes["episode"]]
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert ids == list(range(summary["episodes"]))
+    assert all(lg.clean for lg in logs)
