@@ -158,3 +158,57 @@ def test_sample_categorical_extreme_logits() -> None:
     logits = np.array([[1e4, -1e4, 0.0, -np.inf]], dtype=np.float32)
     out = sample_categorical(np.repeat(logits, 100, 0), np.random.default_rng(0))
     assert (out == 0).all()
+
+
+@pytest.mark.parametrize("shared", [True, False])
+def test_parameters_are_views_of_one_packed_buffer(shared: bool) -> None:
+    m = model(shared)
+    packed = m.packed()
+    assert packed is not None
+    assert packed.flat.numel() == n_params(m)
+    k = N + m.n_critics
+    assert packed.w1.shape == (k * H, OBS) and packed.b1.shape == (k * H,)
+    assert torch.equal(packed.w1[: N * H].view(N, H, OBS), m.actor_hidden.weight)
+    assert torch.equal(packed.w1[N * H :].view(-1, H, OBS), m.critic_hidden.weight)
+    assert torch.equal(
+        packed.b1, torch.cat([m.actor_hidden.bias.flatten(), m.critic_hidden.bias.flatten()])
+    )
+    assert torch.equal(packed.w2_actor, m.actor_out.weight)
+    assert torch.equal(packed.w2_critic, m.critic_out.weight)
+    assert torch.equal(
+        packed.b2, torch.cat([m.actor_out.bias.flatten(), m.critic_out.bias.flatten()])
+    )
+    version = m.actor_out.weight._version
+    with torch.no_grad():
+        packed.flat.add_(1.0)  # one buffer: every parameter sees it (and its version moves)
+    assert m.actor_out.weight._version > version
+    assert torch.equal(packed.w2_critic, m.critic_out.weight)
+    assert m.critic_out.weight.is_leaf and m.critic_out.weight.requires_grad
+
+
+def test_packing_keeps_the_initialisation_and_parameter_names() -> None:
+    g = torch.Generator().manual_seed(4)
+    layers = [StackedLinear(N, OBS, H, g), StackedLinear(N, H, A, g)]
+    layers += [StackedLinear(1, OBS, H, g), StackedLinear(1, H, 1, g)]
+    m = model(True, seed=4)
+    expected = [t for layer in layers for t in (layer.weight, layer.bias)]
+    assert [name for name, _ in m.named_parameters()] == [
+        f"{layer}.{kind}"
+        for layer in ("actor_hidden", "actor_out", "critic_hidden", "critic_out")
+        for kind in ("weight", "bias")
+    ]
+    for p, q in zip(m.parameters(), expected, strict=True):
+        assert torch.equal(p, q)
+
+
+def test_packing_is_reported_lost_after_conversion() -> None:
+    m = model(True)
+    assert m.to("cpu").packed() is not None  # a no-op move keeps it
+    m.load_state_dict(model(True, seed=1).state_dict())  # copied in place: kept
+    assert m.packed() is not None
+    assert m.double().packed() is None
+    logits, values = m(torch.randn(2, OBS, dtype=torch.float64))  # still a working model
+    assert logits.shape == (2, N, A) and values.shape == (2, 1)
+    obs = np.random.default_rng(0).random((3, OBS))
+    expected = m.policy_logits(torch.from_numpy(obs)).detach().numpy()
+    np.testing.assert_allclose(m.logits_np(obs), expected, atol=1e-5)  # snapshot refreshed

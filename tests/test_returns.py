@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
-from a2cm_phys.algos.returns import advantages, discounted_returns
+from a2cm_phys.algos.returns import advantages, discounted_returns, discounted_returns_np
 
 torch.set_num_threads(1)
 
@@ -134,3 +135,53 @@ def test_advantages() -> None:
     g2 = torch.tensor([[[1.0, 4.0]]])
     v2 = torch.tensor([[[0.5, 5.0]]])
     assert advantages(g2, v2).tolist() == [[[0.5, -1.0]]]
+
+
+def python_returns(r, term, trunc, boot, tval, gamma) -> np.ndarray:
+    """Eq. 13 one env and one critic at a time, in Python floats."""
+    t_len, n_envs, n_critics = tval.shape
+    out = np.zeros((t_len, n_envs, n_critics))
+    for b in range(n_envs):
+        for c in range(n_critics):
+            g = float(boot[b, c])
+            for t in reversed(range(t_len)):
+                rt = float(np.float32(r[t, b]))
+                if term[t, b]:
+                    g = rt
+                elif trunc[t, b]:
+                    g = rt + float(np.float32(gamma) * np.float32(tval[t, b, c]))
+                else:
+                    g = rt + float(np.float32(gamma)) * g
+                out[t, b, c] = g
+    return out
+
+
+def test_matches_a_plain_python_recurrence_on_random_batches() -> None:
+    rng = np.random.default_rng(0)
+    for trial in range(50):
+        t_len, n_envs, n_critics = rng.integers(1, 10), rng.integers(1, 20), rng.integers(1, 4)
+        r = rng.normal(size=(t_len, n_envs)).astype(np.float32)
+        term = rng.random((t_len, n_envs)) < 0.2
+        trunc = rng.random((t_len, n_envs)) < 0.2
+        boot = rng.normal(size=(n_envs, n_critics)).astype(np.float32)
+        tval = rng.normal(size=(t_len, n_envs, n_critics)).astype(np.float32)
+        tval[~trunc] = np.nan if trial % 2 else np.inf  # never read
+        gamma = float(rng.choice([0.0, 0.5, 0.99, 1.0]))
+        expected = python_returns(r, term, trunc, boot, tval, gamma)
+        got = discounted_returns_np(r, term, trunc, boot, tval, gamma)
+        assert got.dtype == np.float32 and got.shape == (t_len, n_envs, n_critics)
+        np.testing.assert_allclose(got, expected, rtol=1e-6, atol=1e-6)
+        via_torch = discounted_returns(*map(torch.from_numpy, (r, term, trunc, boot, tval)), gamma)
+        assert np.array_equal(via_torch.numpy(), got)
+
+
+def test_empty_batch() -> None:
+    g = discounted_returns_np(
+        np.zeros((0, 3)),
+        np.zeros((0, 3), bool),
+        np.zeros((0, 3), bool),
+        np.zeros(3),
+        np.zeros((0, 3)),
+        0.9,
+    )
+    assert g.shape == (0, 3)

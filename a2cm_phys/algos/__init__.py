@@ -6,17 +6,25 @@
 """
 
 from a2cm_phys.algos.learner import BATCH_KEYS, Learner, NonFiniteLoss
-from a2cm_phys.algos.models import ActorCritic, StackedLinear, make_model, sample_categorical
-from a2cm_phys.algos.returns import advantages, discounted_returns
+from a2cm_phys.algos.models import (
+    ActorCritic,
+    PackedParams,
+    StackedLinear,
+    make_model,
+    sample_categorical,
+)
+from a2cm_phys.algos.returns import advantages, discounted_returns, discounted_returns_np
 
 __all__ = [
     "BATCH_KEYS",
     "ActorCritic",
     "Learner",
     "NonFiniteLoss",
+    "PackedParams",
     "StackedLinear",
     "advantages",
     "discounted_returns",
+    "discounted_returns_np",
     "make_model",
     "sample_categorical",
 ]

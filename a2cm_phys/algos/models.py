@@ -9,6 +9,12 @@ leading agent dimension, so all of them are evaluated in one batched op, not a P
 - **A2C** (``shared_critic=False``): N actors and N critics, critic i learns agent i's returns.
 - **A2CM** (``shared_critic=True``): N actors and ONE critic trained on the team return.
 
+All parameters live in one contiguous float buffer (:meth:`ActorCritic.packed`), laid out so
+that the first layers of every actor and critic form a single ``(K·H, obs_dim)`` matrix: the
+learner's fast path (:mod:`a2cm_phys.algos.learner`) evaluates and differentiates the whole
+network with a handful of matmuls and steps RMSprop on the buffer in one go. They remain
+separate ``nn.Parameter`` objects (names, shapes and counts as without the packing).
+
 For rollouts :meth:`ActorCritic.act` samples actions from a numpy snapshot of the actor
 weights (measured faster than torch for 1–16 rows; see ``backend``), refreshed automatically
 whenever the torch parameters change in place (optimiser step, ``load_state_dict``).
@@ -17,7 +23,7 @@ whenever the torch parameters change in place (optimiser step, ``load_state_dict
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, NamedTuple
 
 import numpy as np
 import torch
@@ -77,6 +83,23 @@ class StackedLinear(nn.Module):
         return f"n={self.n}, in_features={self.in_features}, out_features={self.out_features}"
 
 
+class PackedParams(NamedTuple):
+    """Views of one flat buffer laid out like :meth:`ActorCritic.packed` (K = N + C)."""
+
+    flat: torch.Tensor
+    """Every parameter, contiguous: the order of the fields below."""
+    w1: torch.Tensor
+    """``(K·H, obs_dim)``: ``actor_hidden.weight`` rows, then ``critic_hidden.weight`` rows."""
+    b1: torch.Tensor
+    """``(K·H,)``: ``actor_hidden.bias`` then ``critic_hidden.bias``."""
+    w2_actor: torch.Tensor
+    """``(N, A, H)``: ``actor_out.weight``."""
+    w2_critic: torch.Tensor
+    """``(C, 1, H)``: ``critic_out.weight``."""
+    b2: torch.Tensor
+    """``(N·A + C,)``: ``actor_out.bias`` then ``critic_out.bias``."""
+
+
 class ActorCritic(nn.Module):
     """N actors and C critics (C = 1 for A2CM, C = N for A2C) over one global observation.
 
@@ -107,7 +130,9 @@ class ActorCritic(nn.Module):
         self.actor_out = StackedLinear(n_agents, hidden, n_actions, generator)
         self.critic_hidden = StackedLinear(c, obs_dim, hidden, generator)
         self.critic_out = StackedLinear(c, hidden, 1, generator)
+        self._pack_parameters()
         self._snapshot: tuple[np.ndarray, ...] | None = None
+        self._snapshot_arrays: tuple[np.ndarray, ...] | None = None  # reused by every refresh
         self._snapshot_key: tuple[int, ...] | None = None
         self._cache_actor_params()
 
@@ -115,6 +140,79 @@ class ActorCritic(nn.Module):
     def n_critics(self) -> int:
         """Number of critics C: 1 for A2CM, N for A2C."""
         return self.critic_out.n
+
+    # ------------------------------------------------------------------ packed parameters
+    def _pack_parameters(self) -> None:
+        """Re-home every parameter (values unchanged) into one contiguous buffer ``_flat``.
+
+        Each parameter becomes a new ``nn.Parameter`` viewing its slice of the buffer, so it
+        also shares the buffer's version counter. Done at construction, before any optimiser
+        holds the parameters.
+        """
+        ah, ch, ao, co = self.actor_hidden, self.critic_hidden, self.actor_out, self.critic_out
+        slots = (  # the field order of PackedParams
+            (ah, "weight"),
+            (ch, "weight"),
+            (ah, "bias"),
+            (ch, "bias"),
+            (ao, "weight"),
+            (co, "weight"),
+            (ao, "bias"),
+            (co, "bias"),
+        )
+        old = [getattr(layer, name) for layer, name in slots]
+        flat = torch.empty(sum(p.numel() for p in old), dtype=old[0].dtype, device=old[0].device)
+        views = self._split(flat)
+        with torch.no_grad():
+            for view, p in zip(views, old, strict=True):
+                view.copy_(p)
+        for (layer, name), view, p in zip(slots, views, old, strict=True):
+            setattr(layer, name, nn.Parameter(view, requires_grad=p.requires_grad))
+        self._flat = flat
+        self._flat_slots = tuple((layer._parameters, name) for layer, name in slots)
+        self._flat_params = tuple(getattr(layer, name) for layer, name in slots)
+        self._flat_offsets = tuple(v.data_ptr() - flat.data_ptr() for v in views)  # bytes
+        self._packed = self.packed_views(flat)
+
+    def _split(self, buffer: torch.Tensor) -> list[torch.Tensor]:
+        """Per-parameter views of a packed buffer, in :class:`PackedParams` field order."""
+        n, c, h, a, d = self.n_agents, self.n_critics, self.hidden, self.n_actions, self.obs_dim
+        shapes = ((n, h, d), (c, h, d), (n, h), (c, h), (n, a, h), (c, 1, h), (n, a), (c, 1))
+        sizes = [math.prod(shape) for shape in shapes]
+        return [part.view(shape) for part, shape in zip(buffer.split(sizes), shapes, strict=True)]
+
+    def packed_views(self, buffer: torch.Tensor) -> PackedParams:
+        """View a flat buffer of ``_flat``'s size with the packed layout (e.g. gradients)."""
+        kh = (self.n_agents + self.n_critics) * self.hidden
+        d, b2_size = self.obs_dim, self.n_agents * self.n_actions + self.n_critics
+        parts = self._split(buffer)
+        return PackedParams(
+            flat=buffer,
+            w1=buffer[: kh * d].view(kh, d),
+            b1=buffer[kh * d : kh * (d + 1)],
+            w2_actor=parts[4],
+            w2_critic=parts[5],
+            b2=buffer[buffer.numel() - b2_size :],
+        )
+
+    def param_views(self, buffer: torch.Tensor) -> list[tuple[nn.Parameter, torch.Tensor]]:
+        """``(parameter, its slice of buffer)`` pairs, e.g. to make gradients packed views."""
+        return list(zip(self._flat_params, self._split(buffer), strict=True))
+
+    def packed(self) -> PackedParams | None:
+        """Views of the buffer holding every parameter, or ``None`` if it no longer does.
+
+        The packing is lost when parameters are replaced or converted (``.to(dtype)``, a move
+        to another device, ``load_state_dict(assign=True)``); the model still works, only the
+        learner's fast path needs it.
+        """
+        base = self._flat.data_ptr()
+        for (params, name), p, offset in zip(
+            self._flat_slots, self._flat_params, self._flat_offsets, strict=True
+        ):
+            if params[name] is not p or p.data_ptr() != base + offset:
+                return None
+        return self._packed
 
     # ------------------------------------------------------------------ torch forward
     def policy_logits(self, obs: torch.Tensor) -> torch.Tensor:
@@ -177,17 +275,29 @@ class ActorCritic(nn.Module):
 
     def refresh_snapshot(self) -> None:
         """Rebuild the numpy copy of the actor weights used by :meth:`act` now."""
-        n, h, a = self.n_agents, self.hidden, self.n_actions
-        with torch.no_grad():
-            w1 = self.actor_hidden.weight.reshape(n * h, self.obs_dim).T.cpu().numpy()
-            b1 = self.actor_hidden.bias.reshape(n * h).cpu().numpy()
-            # second layer as one block-diagonal (N·H, N·A) matrix: a single small matmul
+        n, h, a, d = self.n_agents, self.hidden, self.n_actions, self.obs_dim
+        if self._snapshot_arrays is None:
+            # the second layer as one block-diagonal (N·H, N·A) matrix: a single small matmul
             w2 = np.zeros((n * h, n * a), dtype=np.float32)
-            w2_stack = self.actor_out.weight.transpose(1, 2).cpu().numpy()  # (N, H, A)
-            for i in range(n):
-                w2[i * h : (i + 1) * h, i * a : (i + 1) * a] = w2_stack[i]
-            b2 = self.actor_out.bias.reshape(n * a).cpu().numpy()
-        self._snapshot = tuple(np.ascontiguousarray(x, dtype=np.float32) for x in (w1, b1, w2, b2))
+            row, item = w2.strides[0], w2.itemsize
+            blocks = np.lib.stride_tricks.as_strided(
+                w2, (n, h, a), (h * row + a * item, row, item), writeable=True
+            )  # blocks[i] is agent i's (H, A) diagonal block
+            self._snapshot_arrays = (
+                np.empty((d, n * h), dtype=np.float32),
+                np.empty(n * h, dtype=np.float32),
+                w2,
+                np.empty(n * a, dtype=np.float32),
+                blocks,
+            )
+        w1, b1, w2, b2, blocks = self._snapshot_arrays
+        with torch.no_grad():
+            t_w1, t_b1, t_w2, t_b2 = (p.detach().cpu().numpy() for p in self._actor_params)
+        np.copyto(w1, t_w1.reshape(n * h, d).T)
+        np.copyto(b1, t_b1.reshape(n * h))
+        np.copyto(blocks, t_w2.transpose(0, 2, 1))
+        np.copyto(b2, t_b2.reshape(n * a))
+        self._snapshot = (w1, b1, w2, b2)
         self._snapshot_key = self._actor_versions()
 
     def _actor_versions(self) -> tuple[int, ...]:

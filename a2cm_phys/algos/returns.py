@@ -8,8 +8,13 @@ its own final observation, never treated as terminal.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import torch
+
+if TYPE_CHECKING:
+    from numpy.typing import DTypeLike
 
 
 def discounted_returns(
@@ -41,41 +46,63 @@ def discounted_returns(
         ``(T, B)`` rewards are broadcast to every critic; dtype promoted from ``rewards``
         and ``bootstrap_value``. No gradient flows (these are targets).
     """
-    # Targets only (no autograd). The work is done in numpy and the recurrence on Python
-    # floats: ~0.5 µs per element instead of ~15 µs per step of torch op overhead.
+    # Targets only (no autograd): computed in numpy by discounted_returns_np.
     device = rewards.device
-    r, term, trunc, boot, tval = (
-        x.detach().cpu().numpy()
-        for x in (rewards, terminated, truncated, bootstrap_value, truncation_value)
+    returns = discounted_returns_np(
+        *(
+            x.detach().cpu().numpy()
+            for x in (rewards, terminated, truncated, bootstrap_value, truncation_value)
+        ),
+        gamma,
     )
-    term, trunc = term.astype(bool), trunc.astype(bool)
+    return torch.from_numpy(returns).to(device)
+
+
+def discounted_returns_np(
+    rewards: np.ndarray,
+    terminated: np.ndarray,
+    truncated: np.ndarray,
+    bootstrap_value: np.ndarray,
+    truncation_value: np.ndarray,
+    gamma: float,
+    *,
+    dtype: DTypeLike = None,
+) -> np.ndarray:
+    """:func:`discounted_returns` on numpy arrays (same shapes, same rules, same result).
+
+    The recurrence runs backwards over time, vectorised over environments and critics, in
+    float64; the C-contiguous result is then rounded to ``dtype`` (default: promoted from
+    ``rewards`` and ``bootstrap_value``, as :func:`discounted_returns`).
+    """
+    r, tval, boot = rewards, truncation_value, bootstrap_value
+    term, trunc = terminated.astype(bool, copy=False), truncated.astype(bool, copy=False)
     if r.ndim == 3 or tval.ndim == 3 or boot.ndim == 2:
         term, trunc = term[..., None], trunc[..., None]
         r = r if r.ndim == 3 else r[..., None]
         tval = tval if tval.ndim == 3 else tval[..., None]
         boot = boot if boot.ndim == 2 else boot[..., None]
-    dtype = np.promote_types(r.dtype, boot.dtype)
-    live = np.where(term, 0.0, gamma).astype(dtype)  # γ·(1 − term_t)
-    step = r + live * np.where(trunc, tval, 0.0)  # r_t (+ γ·V(final_obs_t) if truncated)
-    carry = np.where(trunc, 0.0, live)  # weight of G_{t+1}: γ, or 0 at an episode end
-    shape = np.broadcast_shapes(step.shape, carry.shape, (1, *boot.shape))
-    n_steps = shape[0]
-    cols = zip(
-        np.broadcast_to(step, shape).reshape(n_steps, -1).T.tolist(),
-        np.broadcast_to(carry, shape).reshape(n_steps, -1).T.tolist(),
-        np.broadcast_to(boot, shape[1:]).reshape(-1).tolist(),
-        strict=True,
-    )
+    step_dtype = np.promote_types(r.dtype, boot.dtype)
+    dtype = step_dtype if dtype is None else np.dtype(dtype)
+    zero, discount = step_dtype.type(0.0), step_dtype.type(gamma)
+    live = np.where(term, zero, discount)  # γ·(1 − term_t)
+    if trunc.any():
+        step = r + live * np.where(trunc, tval, zero)  # r_t (+ γ·V(final_obs_t) if truncated)
+        carry = np.where(trunc, zero, live)  # weight of G_{t+1}: γ, or 0 at an episode end
+    else:
+        step, carry = r, live
+    if len(step) == 0:
+        return np.zeros(np.broadcast_shapes(step.shape, carry.shape, (0, *boot.shape)), dtype)
+    step, carry = step.astype(np.float64), carry.astype(np.float64)
+    end = carry == 0.0
+    any_end = end.reshape(len(end), -1).any(axis=1).tolist()
+    g = boot.astype(np.float64)
     out = []
-    for step_col, carry_col, g in cols:
-        col = [0.0] * n_steps
-        for t in range(n_steps - 1, -1, -1):
-            # at an episode end carry is 0 and G_{t+1} must not leak in (even if not finite)
-            g = step_col[t] + carry_col[t] * g if carry_col[t] else step_col[t]
-            col[t] = g
-        out.append(col)
-    returns = np.asarray(out, dtype=dtype).T.reshape(shape)
-    return torch.from_numpy(np.ascontiguousarray(returns)).to(device)
+    for t in range(len(step) - 1, -1, -1):
+        if any_end[t]:  # at an episode end G_{t+1} must not leak in (even if not finite)
+            g = np.where(end[t], 0.0, g)
+        g = carry[t] * g + step[t]
+        out.append(g)
+    return np.array(out[::-1], dtype=dtype)
 
 
 def advantages(returns: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
