@@ -219,7 +219,27 @@ def placed_positions(scenario: Scenario, placed: Mapping[str, Sequence[float]]) 
     return xy
 
 
-class PhysicsCore:
+class StateViews:
+    """The ``Core`` views of a physics state array ``_state`` of shape ``(B, 2, N + 1, 2)``
+    (positions, then velocities), shared by :class:`PhysicsCore` and the process core."""
+
+    scenario: Scenario
+    _state: np.ndarray
+
+    def observe(self) -> np.ndarray:
+        """``(B, 4 (N + 1))`` float32: all positions / ``size``, then velocities / ``max_speed``."""
+        return observation(self.scenario, self._state)
+
+    def positions(self) -> np.ndarray:
+        """Agent centres ``(B, N + 1, 2)`` in metres: pursuers, then the evader."""
+        return self._state[:, 0].copy()
+
+    def velocities(self) -> np.ndarray:
+        """Agent velocities ``(B, N + 1, 2)`` in m/s."""
+        return self._state[:, 1].copy()
+
+
+class PhysicsCore(StateViews):
     """``num_envs`` independent physics games of one scenario (implements ``core.Core``)."""
 
     def __init__(self, scenario: Scenario, num_envs: int = 1) -> None:
@@ -330,18 +350,6 @@ class PhysicsCore:
         return settle(self.scenario, self.t, captured, collisions, walls, evader, events)
 
     # ------------------------------------------------------------------ views
-
-    def observe(self) -> np.ndarray:
-        """``(B, 4 (N + 1))`` float32: all positions / ``size``, then velocities / ``max_speed``."""
-        return observation(self.scenario, self._state)
-
-    def positions(self) -> np.ndarray:
-        """Agent centres ``(B, N + 1, 2)`` in metres: pursuers, then the evader."""
-        return self._state[:, 0].copy()
-
-    def velocities(self) -> np.ndarray:
-        """Agent velocities ``(B, N + 1, 2)`` in m/s."""
-        return self._state[:, 1].copy()
 
     def kinetic_energy(self) -> np.ndarray:
         """Total kinetic energy (J) of each game's agents, ``(B,)``."""

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..config import Scenario
 from .core import StepOutcome
-from .physics import PhysicsCore, observation, placed_positions, start_positions
+from .physics import PhysicsCore, StateViews, placed_positions, start_positions
 
 _TIMEOUT = 0.5
 """Seconds between liveness checks while waiting for a worker's reply."""
@@ -94,7 +94,7 @@ def _report(conn: Connection, err: Exception) -> None:
         conn.send(("error", (RuntimeError(f"{type(err).__name__}: {err}"), text)))
 
 
-class ProcessCore:
+class ProcessCore(StateViews):
     """``num_envs`` physics games stepped by ``workers`` processes (implements ``core.Core``).
 
     Call :meth:`close` (or use it as a context manager) to stop the workers; they are
@@ -202,18 +202,6 @@ class ProcessCore:
             evader_action=np.concatenate([o.evader_action for o in outcomes]),
             events=[game for o in outcomes for game in o.events],
         )
-
-    def observe(self) -> np.ndarray:
-        """``(B, 4 (N + 1))`` float32 observations, as :meth:`PhysicsCore.observe`."""
-        return observation(self.scenario, self._state)
-
-    def positions(self) -> np.ndarray:
-        """Agent centres ``(B, N + 1, 2)`` in metres."""
-        return self._state[:, 0].copy()
-
-    def velocities(self) -> np.ndarray:
-        """Agent velocities ``(B, N + 1, 2)`` in m/s."""
-        return self._state[:, 1].copy()
 
     # ------------------------------------------------------------------ protocol
 
