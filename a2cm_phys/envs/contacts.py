@@ -105,6 +105,10 @@ class ContactTracker:
     __slots__ = ("_active", "_began", "_start_active", "_touched_before")
 
     def __init__(self) -> None:
+        self.clear()
+
+    def clear(self) -> None:
+        """Forget every contact: the state of a tracker that has seen nothing."""
         self._active: dict[Pair, int] = {}  # pair -> number of touching shape pairs now
         self._began: set[Pair] = set()  # pairs with a begin callback in this step
         self._start_active: set[Pair] = set()  # pairs touching when this step started

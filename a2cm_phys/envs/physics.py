@@ -90,19 +90,44 @@ def _pair_table(scenario: Scenario) -> list[list[Pair]]:
 
 
 class World:
-    """One game's pymunk space: walls, agent bodies, their servo control bodies, contacts.
+    """One game: its bodies, shapes, servos and contact tracker, and the space they live in.
+
+    The pymunk objects are built once; the space is not. :meth:`rebuild` (called by every
+    reset) moves them, at rest at their start, into a brand-new :class:`pymunk.Space` with
+    new servo joints. A new chipmunk space remembers nothing: no contact cache, no warm-start
+    impulses, fresh spatial indexes, and shape ids counted from zero in the same insertion
+    order, so an episode does not depend on the ones before it (bit-identity with a world
+    that was never used is tested). What the reused objects carry is reset explicitly:
+    positions and velocities, and chipmunk's position-correction velocity, which is cleared
+    by integrating positions over ``dt = 0``. Forces, angles and spins need nothing: no force
+    is ever applied and rotation is locked. Rebuilding this way costs about half of
+    building every object anew and collecting the old ones, which is mostly pymunk's
+    per-object Python bookkeeping (measured in ``BENCHMARKS.md``).
 
     Shapes keep pymunk's default friction and elasticity, both 0: agents slide along walls
     and each other without bouncing, and the servo plays the part of floor friction.
     """
 
-    __slots__ = ("bodies", "commands", "controls", "space", "step", "tracker")
+    __slots__ = (
+        "_callbacks",
+        "_max_force",
+        "_shapes",
+        "_static",
+        "_walls",
+        "bodies",
+        "commands",
+        "controls",
+        "servos",
+        "space",
+        "step",
+        "tracker",
+    )
 
     def __init__(self, scenario: Scenario, xy: np.ndarray, table: list[list[Pair]]) -> None:
         ph, size, n = scenario.physics, float(scenario.size), scenario.pursuers
-        space = pymunk.Space()
-        space.collision_slop = COLLISION_SLOP
+        self._static = pymunk.Body(body_type=pymunk.Body.STATIC)
         tags: dict[pymunk.Shape, int] = {}  # shape -> row of the pair table
+        self._walls: list[pymunk.Shape] = []
         t = ph.wall_thickness
         for x0, y0, x1, y1 in (
             (-t, -t, 0.0, size + t),  # left
@@ -110,15 +135,15 @@ class World:
             (0.0, -t, size, 0.0),  # bottom
             (0.0, size, size, size + t),  # top
         ):
-            wall = pymunk.Poly(space.static_body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+            wall = pymunk.Poly(self._static, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
             wall.collision_type = CollisionType.WALL
             tags[wall] = n + 1
-            space.add(wall)
+            self._walls.append(wall)
         self.bodies: list[pymunk.Body] = []
+        self._shapes: list[pymunk.Shape] = []
         self.controls: list[pymunk.Body] = []
-        for i, (x, y) in enumerate(xy.tolist()):
+        for i in range(n + 1):
             body = pymunk.Body(ph.mass, float("inf"))
-            body.position = (x, y)
             if i < n:
                 shape: pymunk.Shape = pymunk.Poly.create_box(body, (ph.box_side, ph.box_side))
                 shape.collision_type = CollisionType.PURSUER
@@ -126,26 +151,47 @@ class World:
                 shape = pymunk.Circle(body, ph.evader_radius)
                 shape.collision_type = CollisionType.EVADER
             tags[shape] = i
-            control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+            self.bodies.append(body)
+            self._shapes.append(shape)
+            self.controls.append(pymunk.Body(body_type=pymunk.Body.KINEMATIC))
+        self._max_force = ph.max_force
+        self.tracker = ContactTracker()
+        self._callbacks = _callbacks(self.tracker, table, tags)
+        self.space: pymunk.Space | None = None
+        self.servos: list[pymunk.PivotJoint] = []
+        self.commands: list[int] = []  # the action each control body executes
+        self.rebuild(xy)
+
+    def rebuild(self, xy: np.ndarray) -> None:
+        """A new space with every agent at rest at ``xy`` (``(N + 1, 2)`` metres)."""
+        old = self.space
+        if old is not None:  # release the objects (its separate callbacks may still fire)
+            old.remove(*self._walls, *self._shapes, *self.servos, *self.bodies, *self.controls)
+            old.remove(self._static)
+        space = pymunk.Space()
+        space.collision_slop = COLLISION_SLOP
+        space.add(self._static, *self._walls)
+        self.servos = []
+        for body, shape, control, (x, y) in zip(
+            self.bodies, self._shapes, self.controls, xy.tolist(), strict=True
+        ):
+            for moved in (body, control):
+                pymunk.Body.update_position(moved, 0.0)  # clears the correction velocity
+                moved.velocity = (0.0, 0.0)
+            body.position = (x, y)
+            control.position = (0.0, 0.0)
             servo = pymunk.PivotJoint(control, body, (0.0, 0.0), (0.0, 0.0))
             servo.max_bias = 0.0
-            servo.max_force = ph.max_force
+            servo.max_force = self._max_force
             space.add(body, shape, control, servo)
-            self.bodies.append(body)
-            self.controls.append(control)
-        self.commands: list[int] = [STAY] * (n + 1)  # the action each control body executes
-        self.tracker = ContactTracker()
-        begin, separate = _callbacks(self.tracker, table, tags)
+            self.servos.append(servo)
+        self.commands = [STAY] * len(self.bodies)
+        self.tracker.clear()
+        begin, separate = self._callbacks
         for a, b in _HANDLED:
             space.on_collision(a, b, begin=begin, separate=separate)
         self.space = space
-        self.step = _stepper(space)
-
-    def dispose(self) -> None:
-        """Unhook the contact callbacks, so that freeing the space (which reports every
-        remaining contact as separated) calls no Python."""
-        for a, b in _HANDLED:
-            self.space.on_collision(a, b, separate=pymunk.empty_callback)
+        self.step: Callable[[float], None] = _stepper(space)
 
 
 def _stepper(space: pymunk.Space) -> Callable[[float], None]:
@@ -263,7 +309,8 @@ class PhysicsCore(StateViews):
         self._dt = 1.0 / ph.substeps
         self._velocity = [tuple(v) for v in (ACTION_DELTAS * ph.max_speed).astype(float).tolist()]
         self._worlds = [World(scenario, self._start, self._table) for _ in range(num_envs)]
-        self._spares: list[World] = []  # fresh worlds at the default start, built in advance
+        self._spares: list[World] = []  # worlds rebuilt at the default start in advance
+        self._retired: list[World] = []  # worlds replaced by spares, to be rebuilt as spares
         self._state = np.zeros((num_envs, 2, n + 1, 2))  # [game, position|velocity, agent, xy]
         self._state[:, 0] = self._start
 
@@ -275,8 +322,9 @@ class PhysicsCore(StateViews):
         seeds: np.ndarray,
         positions: Sequence[Mapping[str, Sequence[float]] | None] | None = None,
     ) -> None:
-        """Start new episodes in games ``envs``: rebuild their spaces, at the default start
-        or at explicit ``positions`` (one mapping or ``None`` per game, metres)."""
+        """Start new episodes in games ``envs``: rebuild their spaces (:meth:`World.rebuild`),
+        at the default start or at explicit ``positions`` (one mapping or ``None`` per game,
+        metres)."""
         envs = np.atleast_1d(np.asarray(envs, dtype=np.int64))
         placed = list(positions or ())
         starts = [self._start] * len(envs)
@@ -284,22 +332,28 @@ class PhysicsCore(StateViews):
             if where:  # validate everything before touching any game
                 starts[k] = placed_positions(self.scenario, where)
         for env, xy in zip(envs.tolist(), starts, strict=True):
-            self._worlds[env].dispose()
             if xy is self._start and self._spares:
+                self._retired.append(self._worlds[env])
                 self._worlds[env] = self._spares.pop()
             else:
-                self._worlds[env] = World(self.scenario, xy, self._table)
+                self._worlds[env].rebuild(xy)
             self._state[env, 0], self._state[env, 1] = xy, 0.0
         self.t[envs] = 0
         self.episode_seed[envs] = seeds
 
     def build_spare(self) -> int:
-        """Build one world at the default start for a later :meth:`reset` to take, and
-        return how many are waiting. Building is most of a reset's cost; a caller with idle
-        time (a worker process waiting for its next request) can spend it here. A spare is
-        a world built exactly as ``reset`` would build it and never stepped, so using one
-        changes nothing but when the work is done."""
-        self._spares.append(World(self.scenario, self._start, self._table))
+        """Rebuild one world at the default start for a later :meth:`reset` to take, and
+        return how many are waiting. Rebuilding is most of a reset's cost; a caller with
+        idle time (a worker process waiting for its next request) can spend it here. A
+        spare is rebuilt exactly as ``reset`` would rebuild it and never stepped, so using
+        one changes nothing but when the work is done. Spares are made from the worlds
+        that earlier resets replaced, or built new while there are none."""
+        if self._retired:
+            world = self._retired.pop()
+            world.rebuild(self._start)
+        else:
+            world = World(self.scenario, self._start, self._table)
+        self._spares.append(world)
         return len(self._spares)
 
     # ------------------------------------------------------------------ step

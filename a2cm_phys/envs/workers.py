@@ -54,9 +54,9 @@ def _serve(conn: Connection, scenario: Scenario, num_envs: int, spares: int) -> 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     try:
         core = PhysicsCore(scenario, num_envs)
-        # Rebuilding a world allocates a few hundred pymunk objects, and the cyclic GC
-        # run that allocation triggers costs about as much as the rebuild. This process
-        # only steps worlds: collect rarely, and never rescan what exists now.
+        # Every rebuild leaves a pymunk space, joints and handlers as cyclic garbage, and
+        # allocation-triggered GC runs rescan everything alive. This process only steps
+        # worlds: collect rarely, and never rescan what exists now.
         gc.collect()
         gc.freeze()
         gc.set_threshold(_GC_THRESHOLD, 10, 10)
