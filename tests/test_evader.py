@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from a2cm_phys.config import load_scenario
-from a2cm_phys.envs.evader import evader_actions, flee_actions, random_actions
+from a2cm_phys.envs.evader import Evader, evader_actions, flee_actions, random_actions
 
 
 def test_random_evader_is_uniform_and_reproducible():
@@ -55,3 +56,27 @@ def test_static_evader_stays():
         sc, np.zeros(3, dtype=np.uint64), np.zeros(3, dtype=np.int64), None, None, 0, 4
     )
     np.testing.assert_array_equal(acts, [4, 4, 4])
+
+
+@pytest.mark.parametrize("policy", ["random", "flee", "static"])
+@pytest.mark.parametrize("num_envs, horizon", [(1, None), (5, 3), (5, 1), (64, None)])
+def test_moves_computed_ahead_are_the_step_by_step_moves(policy, num_envs, horizon):
+    """Games restarting at random times, and a forgotten look-ahead, change nothing."""
+    sc = load_scenario("grid", {"evader": policy})
+    evader = Evader(sc, num_envs, 0, 4, horizon)
+    rng = np.random.default_rng(7)
+    seed = rng.integers(0, 2**63, num_envs).astype(np.uint64)
+    t = np.zeros(num_envs, dtype=np.int64)
+    for step in range(150):
+        xy = rng.integers(0, 5, (num_envs, sc.pursuers + 1, 2)).astype(np.float64)
+        got = evader.moves(seed, t, xy[:, -1], xy[:, :-1])
+        want = evader_actions(sc, seed, t, xy[:, -1], xy[:, :-1], 0, 4)
+        np.testing.assert_array_equal(got, want, err_msg=f"step {step}")
+        t += 1
+        done = np.flatnonzero(rng.random(num_envs) < 0.15)
+        seed[done] = rng.integers(0, 2**63, len(done)).astype(np.uint64)
+        t[done] = 0
+        evader.restart(done, seed[done])
+        if step == 70:  # the owner changes its arrays behind the evader's back, and says so
+            t += 1000
+            evader.forget()

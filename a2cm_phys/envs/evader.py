@@ -4,7 +4,9 @@ Randomness is counter-based: the evader's draw at step ``t`` of an episode is a 
 (SplitMix64) of the episode seed, ``t`` and a stream number. A batch of games thus draws
 its random numbers in one vectorised operation, and any single episode is reproduced
 exactly from its seed, in any batch, in any order — which is what ``replay --verify`` and
-the batched-vs-single property tests rely on.
+the batched-vs-single property tests rely on. Being counter-based, the draws can also be
+computed ahead: :class:`Evader` (what the cores use) fills each game's next draws in one
+vectorised call, and the functions below are its step-by-step reference.
 """
 
 from __future__ import annotations
@@ -38,13 +40,21 @@ def draw(seed: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 def draws(seed: np.ndarray, t: np.ndarray, streams: int) -> np.ndarray:
     """``(B, streams)`` independent uniform uint64 draws for step ``t``."""
+    return _lanes(draw(seed, t), streams)
+
+
+def _lanes(drawn: np.ndarray, streams: int) -> np.ndarray:
     lanes = np.arange(1, streams + 1, dtype=np.uint64) * _GOLDEN
-    return mix64(draw(seed, t)[:, None] + lanes)
+    return mix64(drawn[:, None] + lanes)
 
 
 def random_actions(seed: np.ndarray, t: np.ndarray, n_actions: int) -> np.ndarray:
     """Uniform actions in ``[0, n_actions)`` for each game."""
-    return ((draw(seed, t) >> np.uint64(33)) % np.uint64(n_actions)).astype(np.int64)
+    return _uniform_action(draw(seed, t), n_actions)
+
+
+def _uniform_action(drawn: np.ndarray, n_actions: int) -> np.ndarray:
+    return ((drawn >> np.uint64(33)) % np.uint64(n_actions)).astype(np.int64)
 
 
 def flee_actions(
@@ -62,10 +72,22 @@ def flee_actions(
     start of the step: moves are simultaneous). Moves are clipped to ``[low, high]`` as the
     arena does. Ties are broken uniformly at random by a random rank per action.
     """
+    return flee_moves(draw(seed, t), evader_xy, pursuer_xy, n_actions, low, high)
+
+
+def flee_moves(
+    drawn: np.ndarray,
+    evader_xy: np.ndarray,
+    pursuer_xy: np.ndarray,
+    n_actions: int,
+    low: float,
+    high: float,
+) -> np.ndarray:
+    """:func:`flee_actions` given the step's draws ``drawn = draw(seed, t)``."""
     deltas = _DELTAS_F[:n_actions]
     cand = np.clip(evader_xy[:, None, :] + deltas[None], low, high)  # (B, A, 2)
     dist = np.abs(cand[:, :, None, :] - pursuer_xy[:, None, :, :]).sum(-1).min(-1)  # (B, A)
-    rank = (draws(seed, t, n_actions) >> np.uint64(12)).astype(np.float64) / 2.0**52
+    rank = (_lanes(drawn, n_actions) >> np.uint64(12)).astype(np.float64) / 2.0**52
     best = dist.max(axis=1, keepdims=True)
     score = np.where(np.isclose(dist, best, rtol=0.0, atol=1e-9), rank, -1.0)
     return score.argmax(axis=1).astype(np.int64)
@@ -90,6 +112,69 @@ def evader_actions(
     if scenario.evader == "flee":
         return flee_actions(seed, t, evader_xy, pursuer_xy, scenario.actions, low, high)
     return np.full(len(seed), STAY, dtype=np.int64)
+
+
+class Evader:
+    """The evader of a batch of ``num_envs`` games, as the cores use it: the moves of
+    :func:`evader_actions`, with the random draws computed ahead.
+
+    Each game's draws for its next ``horizon`` steps are filled in one vectorised call and
+    read one column per step. For small batches, where numpy's fixed cost per call is most
+    of the work, this is several times cheaper than hashing every step; the default
+    horizon shrinks as batches grow (to 1 from 4096 games, i.e. no look-ahead). The core
+    owns the seed and step arrays it passes to :meth:`moves`: it must call :meth:`restart`
+    for games it resets (they start at ``t = 0`` with new seeds) and :meth:`forget` when it
+    changes them in any other way (loading a state).
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        num_envs: int,
+        low: float,
+        high: float,
+        horizon: int | None = None,
+    ) -> None:
+        self.policy, self.n_actions = scenario.evader, scenario.actions
+        self.low, self.high = low, high
+        self.horizon = horizon or max(1, min(64, 4096 // max(num_envs, 1)))
+        random = self.policy == "random"  # store the moves themselves, else the draws
+        self._ahead = np.zeros((num_envs, self.horizon), np.int64 if random else np.uint64)
+        self._next = self.horizon  # column of the coming step; ``horizon``: refill first
+
+    def _fill(self, seed: np.ndarray, t: np.ndarray) -> np.ndarray:
+        drawn = draw(seed, t)
+        return _uniform_action(drawn, self.n_actions) if self.policy == "random" else drawn
+
+    def restart(self, envs: np.ndarray, seeds: np.ndarray) -> None:
+        """Games ``envs`` start new episodes (``t = 0``) with episode ``seeds``."""
+        left = self.horizon - self._next
+        if left > 0 and self.policy != "static":
+            ahead = np.arange(left)[None]
+            self._ahead[envs, self._next :] = self._fill(np.asarray(seeds)[..., None], ahead)
+
+    def forget(self) -> None:
+        """Drop every draw computed ahead (the seeds or steps changed)."""
+        self._next = self.horizon
+
+    def moves(
+        self,
+        seed: np.ndarray,
+        t: np.ndarray,
+        evader_xy: np.ndarray | None = None,
+        pursuer_xy: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """The evader's action in every game at steps ``t`` (see :func:`evader_actions`)."""
+        if self.policy == "static":
+            return np.full(len(seed), STAY, dtype=np.int64)
+        if self._next == self.horizon:
+            self._ahead = self._fill(seed[:, None], t[:, None] + np.arange(self.horizon))
+            self._next = 0
+        column = self._ahead[:, self._next].copy()
+        self._next += 1
+        if self.policy == "random":
+            return column
+        return flee_moves(column, evader_xy, pursuer_xy, self.n_actions, self.low, self.high)
 
 
 _DELTAS_F = np.array([(0, 1), (0, -1), (-1, 0), (1, 0), (0, 0)], dtype=np.float64)

@@ -21,7 +21,7 @@ from .core import (
     parse_positions,
     settle,
 )
-from .evader import evader_actions
+from .evader import Evader
 
 
 def meet(old_a: np.ndarray, new_a: np.ndarray, old_b: np.ndarray, new_b: np.ndarray) -> np.ndarray:
@@ -109,6 +109,7 @@ class GridCore:
         self.cells = np.repeat(self._start[:, None], num_envs, axis=1)  # (N + 1, B)
         self.t = np.zeros(num_envs, dtype=np.int64)
         self.episode_seed = np.zeros(num_envs, dtype=np.uint64)
+        self._evader = Evader(scenario, num_envs, 0, scenario.size - 1)
 
     def reset(
         self,
@@ -119,6 +120,7 @@ class GridCore:
         """Start new episodes in games ``envs``; optional explicit positions per game."""
         self.t[envs] = 0
         self.episode_seed[envs] = seeds
+        self._evader.restart(envs, self.episode_seed[envs])
         self.cells[:, envs] = self._start[:, None]
         for env, placed in zip(np.atleast_1d(envs), positions or (), strict=False):
             if placed:
@@ -141,9 +143,7 @@ class GridCore:
             evader_xy, pursuer_xy = xy[n], xy[:n].transpose(1, 0, 2)
         else:
             evader_xy = pursuer_xy = None
-        evader = evader_actions(
-            sc, self.episode_seed, self.t, evader_xy, pursuer_xy, 0, sc.size - 1
-        )
+        evader = self._evader.moves(self.episode_seed, self.t, evader_xy, pursuer_xy)
         self.cells, captured, collisions, walls = self.rules.apply(self.cells, actions, evader)
         self.t += 1
         return settle(sc, self.t, captured, collisions, walls, evader)
@@ -180,3 +180,4 @@ class GridCore:
         self.cells = cells.copy()
         self.t = np.asarray(state["t"], dtype=np.int64).copy()
         self.episode_seed = np.asarray(state["episode_seed"], dtype=np.uint64).copy()
+        self._evader.forget()

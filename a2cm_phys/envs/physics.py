@@ -48,7 +48,7 @@ from .core import (
     parse_positions,
     settle,
 )
-from .evader import STAY, evader_actions
+from .evader import STAY, Evader
 
 
 class CollisionType(IntEnum):
@@ -306,6 +306,8 @@ class PhysicsCore(StateViews):
         self.episode_seed = np.zeros(num_envs, dtype=np.uint64)
         self._table = _pair_table(scenario)
         self._start = start_positions(scenario)
+        radius = float(ph.evader_radius)  # the evader's centre stays this far from walls
+        self._evader = Evader(scenario, num_envs, radius, scenario.size - radius)
         self._dt = 1.0 / ph.substeps
         self._velocity = [tuple(v) for v in (ACTION_DELTAS * ph.max_speed).astype(float).tolist()]
         self._worlds = [World(scenario, self._start, self._table) for _ in range(num_envs)]
@@ -340,6 +342,7 @@ class PhysicsCore(StateViews):
             self._state[env, 0], self._state[env, 1] = xy, 0.0
         self.t[envs] = 0
         self.episode_seed[envs] = seeds
+        self._evader.restart(envs, self.episode_seed[envs])
 
     def build_spare(self) -> int:
         """Rebuild one world at the default start for a later :meth:`reset` to take, and
@@ -362,10 +365,7 @@ class PhysicsCore(StateViews):
         """Advance every game one second with the pursuers' ``(B, N)`` actions."""
         sc, n = self.scenario, self.scenario.pursuers
         pos = self._state[:, 0]
-        low = float(sc.physics.evader_radius)
-        evader = evader_actions(
-            sc, self.episode_seed, self.t, pos[:, n], pos[:, :n], low, sc.size - low
-        )
+        evader = self._evader.moves(self.episode_seed, self.t, pos[:, n], pos[:, :n])
         self.t += 1
         velocity, dt, substeps = self._velocity, self._dt, range(sc.physics.substeps)
         state = []
