@@ -84,7 +84,12 @@ def test_invalid_positions_name_the_agent(positions, message):
         ({"pursuer_0": 4, "pursuer_1": 0, "pursuer_2": 0}, "pursuer_0"),
         ({"pursuer_0": 0, "pursuer_1": -1, "pursuer_2": 0}, "pursuer_1"),
         ({"pursuer_0": 0, "pursuer_1": 0, "pursuer_2": 1.0}, "pursuer_2"),
-        ({"pursuer_0": 0, "pursuer_1": 0}, "missing"),
+        ({"pursuer_0": 0, "pursuer_1": True, "pursuer_2": 0}, "pursuer_1"),
+        ({"pursuer_0": 0, "pursuer_1": 0, "pursuer_2": np.int64(9)}, "pursuer_2"),
+        ({"pursuer_0": 0, "pursuer_1": 0}, r"missing \['pursuer_2'\]"),
+        ({}, "missing"),
+        ({"pursuer_0": 0, "pursuer_1": 0, "pursuer_2": 0, "pursuer_3": 0}, "unknown"),
+        ({"pursuer_0": 0, "pursuer_1": 0, "pursuer_3": 0}, r"missing \['pursuer_2'\]"),
     ],
 )
 def test_invalid_actions_name_the_agent(actions, message):

@@ -86,10 +86,12 @@ def settle(
     mode = scenario.collisions.mode
     reward = team_reward(scenario.rewards, mode, captured, collisions, wall_contacts)
     terminated = ends_episode(mode, captured, collisions)
-    truncated = t >= scenario.max_steps
-    truncated &= ~terminated
+    truncated = np.greater(t >= scenario.max_steps, terminated)  # at the limit and not ended
+    if not isinstance(reward, np.ndarray):  # only the step reward: one number for all games
+        reward, scalar = np.empty(len(t)), reward
+        reward.fill(scalar)
     return StepOutcome(
-        reward=reward if isinstance(reward, np.ndarray) else np.full(len(t), reward),
+        reward=reward,
         terminated=terminated,
         truncated=truncated,
         captured=captured,

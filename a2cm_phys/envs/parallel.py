@@ -77,15 +77,19 @@ class PursuitParallelEnv:
         """Move every pursuer (one action each) and the evader; see the class docstring."""
         if not self.agents:
             raise RuntimeError("step() called on a finished episode: call reset() first")
-        if len(actions) != len(self.agents) or any(a not in actions for a in self.agents):
+        try:
+            joint: list[Any] | None = [actions[a] for a in self.agents]
+        except KeyError:
+            joint = None
+        if joint is None or len(joint) != len(actions):  # a missing or an unknown agent
             missing = [a for a in self.agents if a not in actions]
             unknown = [a for a in actions if a not in self.agents]
             raise ValueError(f"actions: missing {missing}, unknown {unknown}")
         n_actions = self.scenario.actions
-        joint = [actions[a] for a in self.agents]
         for agent, value in zip(self.agents, joint, strict=True):
-            plain = type(value) is int  # the common case, checked first
-            integer = plain or (isinstance(value, np.integer) and not isinstance(value, bool))
+            if type(value) is int and 0 <= value < n_actions:  # the common case first
+                continue
+            integer = isinstance(value, np.integer) and not isinstance(value, bool)
             if not integer or not 0 <= value < n_actions:
                 raise ValueError(
                     f"invalid action {value!r} for {agent}: expected an integer in [0, {n_actions})"
