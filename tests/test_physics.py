@@ -6,6 +6,7 @@ from __future__ import annotations
 from functools import partial
 
 import numpy as np
+import pymunk
 import pytest
 
 from a2cm_phys import make_env
@@ -274,14 +275,24 @@ def test_worlds_built_ahead_are_the_same_as_worlds_built_at_reset():
         assert out_a.events == out_b.events
 
 
-def test_direct_stepping_is_bit_identical_to_space_step(monkeypatch):
+def test_direct_calls_are_bit_identical_to_pymunks_api(monkeypatch):
     sc = load_scenario("phys_collision_continue", {"evader": "flee"})
     seeds = np.arange(3, dtype=np.uint64) + np.uint64(40)
     fast_core = PhysicsCore(sc, 3)
-    assert isinstance(fast_core._worlds[0].step, partial)  # the direct call is in use
+    world = fast_core._worlds[0]
+    direct = [world.step.func, world.steering[0].func, *(p.func for p in world.probes[::4])]
+    cp = pymunk.cp
+    assert direct == [
+        cp.cpSpaceStep,
+        cp.cpBodySetVelocity,
+        cp.cpBodyGetPosition,
+        cp.cpBodyGetVelocity,
+    ]
     fast = rollout(fast_core, seeds, 300, 2)
-    monkeypatch.setattr(physics, "DIRECT_STEP", False)
-    slow = rollout(PhysicsCore(sc, 3), seeds, 300, 2)
+    monkeypatch.setattr(physics, "DIRECT_CALLS", False)
+    slow_core = PhysicsCore(sc, 3)
+    assert not isinstance(slow_core._worlds[0].step, partial)  # pymunk's own Space.step
+    slow = rollout(slow_core, seeds, 300, 2)
     for (pos_a, _, out_a), (pos_b, _, out_b) in zip(fast, slow, strict=True):
         np.testing.assert_array_equal(pos_a, pos_b)
         assert out_a.events == out_b.events

@@ -10,14 +10,14 @@ friction, while the contact solver, which is not force-limited, stops agents at 
 lets them push and be pushed: the controller never moves a body itself.
 
 One env step is one second of simulated time in ``physics.substeps`` fixed substeps. The
-only Python work per substep is one call of chipmunk's step function (see
-:func:`_stepper`); contact callbacks (:meth:`pymunk.Space.on_collision`) run only when
-shapes begin or stop touching and just feed a :class:`~.contacts.ContactTracker`, which
-turns them into the step's events (debounced: see :mod:`.contacts`); the penalties are
-:func:`~.contacts.score_events`. Actions and the evader's moves are applied at the start
-of a step; since pymunk moves bodies before it solves velocities, an agent starting from
-rest covers ``max_speed × (1 − 1/substeps)`` in its first step and exactly ``max_speed``
-per step once at speed.
+only Python work per substep is one call of chipmunk's step function, and per step one
+call per changed servo and per body read (see :data:`DIRECT_CALLS`). Contact callbacks
+(:meth:`pymunk.Space.on_collision`) run only when shapes begin or stop touching and feed
+a :class:`~.contacts.ContactTracker`, which turns them into the step's events (debounced:
+see :mod:`.contacts`); the penalties are :func:`~.contacts.score_events`. Actions and the
+evader's moves are applied at the start of a step; since pymunk moves bodies before it
+solves velocities, an agent starting from rest covers ``max_speed × (1 − 1/substeps)`` in
+its first step and exactly ``max_speed`` per step once at speed.
 """
 
 from __future__ import annotations
@@ -65,8 +65,13 @@ for pixels and would let 0.6 m boxes sink 10 cm into each other."""
 
 Callback = Callable[[pymunk.Arbiter, pymunk.Space, Any], None]
 
-DIRECT_STEP = True
-"""Step spaces through chipmunk's C function directly (see :func:`_stepper`)."""
+DIRECT_CALLS = True
+"""Make the per-step calls (stepping a space, steering a servo, reading a body) straight to
+chipmunk's C functions when this pymunk exposes them, instead of through pymunk's Python
+wrappers of the same calls. The wrappers add bookkeeping for objects added or removed from
+callbacks, which ours never do, and Python attribute machinery: at 10 substeps per env step
+they cost as much as the simulation itself. Trajectories are the same bit for bit (tested
+with this off); world building and rebuilding always use the public API."""
 
 _HANDLED = (
     (CollisionType.PURSUER, CollisionType.PURSUER),
@@ -117,8 +122,10 @@ class World:
         "bodies",
         "commands",
         "controls",
+        "probes",
         "servos",
         "space",
+        "steering",
         "step",
         "tracker",
     )
@@ -154,6 +161,10 @@ class World:
             self.bodies.append(body)
             self._shapes.append(shape)
             self.controls.append(pymunk.Body(body_type=pymunk.Body.KINEMATIC))
+        self.steering = [_steering(control) for control in self.controls]
+        probes = [_probes(body) for body in self.bodies]
+        # positions of all agents, then their velocities: the layout of the state array
+        self.probes = [position for position, _ in probes] + [velocity for _, velocity in probes]
         self._max_force = ph.max_force
         self.tracker = ContactTracker()
         self._callbacks = _callbacks(self.tracker, table, tags)
@@ -195,18 +206,32 @@ class World:
 
 
 def _stepper(space: pymunk.Space) -> Callable[[float], None]:
-    """A function advancing ``space`` by ``dt``: chipmunk's ``cpSpaceStep`` called directly
-    when :data:`DIRECT_STEP` is on and this pymunk exposes it, else :meth:`Space.step`.
-
-    ``Space.step`` wraps the same C call in Python bookkeeping for objects added or removed
-    from callbacks, which ours never do; at 10 substeps per env step the wrapper costs as
-    much as the simulation itself. The trajectories are the same bit for bit (tested).
-    """
-    cp_step = getattr(pymunk.cp, "cpSpaceStep", None)
+    """A function advancing ``space`` by ``dt`` (:meth:`pymunk.Space.step`, or chipmunk's
+    ``cpSpaceStep`` directly: see :data:`DIRECT_CALLS`)."""
     cp_space = getattr(space, "_space", None)
-    if not DIRECT_STEP or cp_step is None or cp_space is None:
-        return space.step
-    return partial(cp_step, cp_space)
+    if DIRECT_CALLS and hasattr(pymunk.cp, "cpSpaceStep") and cp_space is not None:
+        return partial(pymunk.cp.cpSpaceStep, cp_space)
+    return space.step
+
+
+def _steering(control: pymunk.Body) -> Callable[[tuple[float, float]], None]:
+    """A function setting ``control``'s velocity (see :data:`DIRECT_CALLS`)."""
+    cp_body = getattr(control, "_body", None)
+    if DIRECT_CALLS and hasattr(pymunk.cp, "cpBodySetVelocity") and cp_body is not None:
+        return partial(pymunk.cp.cpBodySetVelocity, cp_body)
+    return partial(setattr, control, "velocity")
+
+
+def _probes(body: pymunk.Body) -> tuple[Callable[[], Any], Callable[[], Any]]:
+    """Functions reading ``body``'s position and velocity as vectors with ``x`` and ``y``
+    (see :data:`DIRECT_CALLS`)."""
+    cp_body = getattr(body, "_body", None)
+    names = ("cpBodyGetPosition", "cpBodyGetVelocity")
+    if DIRECT_CALLS and all(hasattr(pymunk.cp, f) for f in names) and cp_body is not None:
+        return partial(pymunk.cp.cpBodyGetPosition, cp_body), partial(
+            pymunk.cp.cpBodyGetVelocity, cp_body
+        )
+    return partial(getattr, body, "position"), partial(getattr, body, "velocity")
 
 
 def _callbacks(
@@ -375,21 +400,20 @@ class PhysicsCore(StateViews):
         ):
             row.append(e)
             commands = world.commands
-            if row != commands:  # setting a pymunk attribute costs microseconds: only changes
-                for i, (control, a, was) in enumerate(
-                    zip(world.controls, row, commands, strict=True)
+            if row != commands:  # setting a velocity costs microseconds: only changes
+                for i, (steer, a, was) in enumerate(
+                    zip(world.steering, row, commands, strict=True)
                 ):
                     if a != was:
-                        control.velocity = velocity[a]
+                        steer(velocity[a])
                         commands[i] = a
             space_step = world.step
             for _ in substeps:
                 space_step(dt)
             events.append(world.tracker.end_step(step))
-            for body in world.bodies:
-                state.extend(body.position)
-            for body in world.bodies:
-                state.extend(body.velocity)
+            for probe in world.probes:
+                v = probe()
+                state += v.x, v.y
         self._state[:] = np.array(state).reshape(self._state.shape)
         return self._score(events, evader)
 
