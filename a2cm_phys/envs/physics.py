@@ -66,12 +66,12 @@ for pixels and would let 0.6 m boxes sink 10 cm into each other."""
 Callback = Callable[[pymunk.Arbiter, pymunk.Space, Any], None]
 
 DIRECT_CALLS = True
-"""Make the per-step calls (stepping a space, steering a servo, reading a body) straight to
-chipmunk's C functions when this pymunk exposes them, instead of through pymunk's Python
-wrappers of the same calls. The wrappers add bookkeeping for objects added or removed from
-callbacks, which ours never do, and Python attribute machinery: at 10 substeps per env step
-they cost as much as the simulation itself. Trajectories are the same bit for bit (tested
-with this off); world building and rebuilding always use the public API."""
+"""Make the frequent calls (stepping a space, steering a servo, reading and placing a body)
+straight to chipmunk's C functions when this pymunk exposes them, instead of through
+pymunk's Python wrappers of the same calls. The wrappers add bookkeeping for objects added
+or removed from callbacks, which ours never do, and Python attribute machinery: at 10
+substeps per env step they cost as much as the simulation itself. Trajectories are the
+same bit for bit (tested with this off); building a world uses the public API only."""
 
 _HANDLED = (
     (CollisionType.PURSUER, CollisionType.PURSUER),
@@ -116,6 +116,7 @@ class World:
     __slots__ = (
         "_callbacks",
         "_max_force",
+        "_placing",
         "_shapes",
         "_static",
         "_walls",
@@ -161,10 +162,21 @@ class World:
             self.bodies.append(body)
             self._shapes.append(shape)
             self.controls.append(pymunk.Body(body_type=pymunk.Body.KINEMATIC))
-        self.steering = [_steering(control) for control in self.controls]
-        probes = [_probes(body) for body in self.bodies]
+        self.steering = [_access(control, "velocity", write=True) for control in self.controls]
         # positions of all agents, then their velocities: the layout of the state array
-        self.probes = [position for position, _ in probes] + [velocity for _, velocity in probes]
+        self.probes = [
+            _access(body, attr, write=False)
+            for attr in ("position", "velocity")
+            for body in self.bodies
+        ]
+        self._placing = [  # what rebuild sets: body position and velocity, control position
+            (
+                _access(body, "position", write=True),
+                _access(body, "velocity", write=True),
+                _access(control, "position", write=True),
+            )
+            for body, control in zip(self.bodies, self.controls, strict=True)
+        ]
         self._max_force = ph.max_force
         self.tracker = ContactTracker()
         self._callbacks = _callbacks(self.tracker, table, tags)
@@ -183,15 +195,23 @@ class World:
         space.collision_slop = COLLISION_SLOP
         space.add(self._static, *self._walls)
         self.servos = []
-        for body, shape, control, (x, y) in zip(
-            self.bodies, self._shapes, self.controls, xy.tolist(), strict=True
+        rest = (0.0, 0.0)
+        for body, shape, control, steer, (place, set_velocity, place_control), xy_i in zip(
+            self.bodies,
+            self._shapes,
+            self.controls,
+            self.steering,
+            self._placing,
+            xy.tolist(),
+            strict=True,
         ):
-            for moved in (body, control):
-                pymunk.Body.update_position(moved, 0.0)  # clears the correction velocity
-                moved.velocity = (0.0, 0.0)
-            body.position = (x, y)
-            control.position = (0.0, 0.0)
-            servo = pymunk.PivotJoint(control, body, (0.0, 0.0), (0.0, 0.0))
+            pymunk.Body.update_position(body, 0.0)  # clears the correction velocity
+            pymunk.Body.update_position(control, 0.0)
+            place(tuple(xy_i))
+            set_velocity(rest)
+            place_control(rest)
+            steer(rest)
+            servo = pymunk.PivotJoint(control, body, rest, rest)
             servo.max_bias = 0.0
             servo.max_force = self._max_force
             space.add(body, shape, control, servo)
@@ -214,24 +234,15 @@ def _stepper(space: pymunk.Space) -> Callable[[float], None]:
     return space.step
 
 
-def _steering(control: pymunk.Body) -> Callable[[tuple[float, float]], None]:
-    """A function setting ``control``'s velocity (see :data:`DIRECT_CALLS`)."""
-    cp_body = getattr(control, "_body", None)
-    if DIRECT_CALLS and hasattr(pymunk.cp, "cpBodySetVelocity") and cp_body is not None:
-        return partial(pymunk.cp.cpBodySetVelocity, cp_body)
-    return partial(setattr, control, "velocity")
-
-
-def _probes(body: pymunk.Body) -> tuple[Callable[[], Any], Callable[[], Any]]:
-    """Functions reading ``body``'s position and velocity as vectors with ``x`` and ``y``
-    (see :data:`DIRECT_CALLS`)."""
-    cp_body = getattr(body, "_body", None)
-    names = ("cpBodyGetPosition", "cpBodyGetVelocity")
-    if DIRECT_CALLS and all(hasattr(pymunk.cp, f) for f in names) and cp_body is not None:
-        return partial(pymunk.cp.cpBodyGetPosition, cp_body), partial(
-            pymunk.cp.cpBodyGetVelocity, cp_body
-        )
-    return partial(getattr, body, "position"), partial(getattr, body, "velocity")
+def _access(body: pymunk.Body, attr: str, write: bool) -> Callable[..., Any]:
+    """A function reading (no argument) or writing (one) ``body.position`` or
+    ``body.velocity``: chipmunk's getter or setter called directly on the body's C handle,
+    or pymunk's property (see :data:`DIRECT_CALLS`). Read values have ``x`` and ``y``."""
+    name = f"cpBody{'Set' if write else 'Get'}{attr.capitalize()}"
+    c_function, cp_body = getattr(pymunk.cp, name, None), getattr(body, "_body", None)
+    if DIRECT_CALLS and c_function is not None and cp_body is not None:
+        return partial(c_function, cp_body)
+    return partial(setattr if write else getattr, body, attr)
 
 
 def _callbacks(
