@@ -1,16 +1,18 @@
 """``ProcessCore``: the physics core with its games split across worker processes.
 
 Each worker holds one :class:`~.physics.PhysicsCore` for a contiguous slice of the games
-and talks to the parent over a :func:`multiprocessing.Pipe`. A step is one round trip:
-the parent sends every worker its slice of the actions before collecting any reply, so the
-workers step in parallel, and each reply carries the step's outcome with the positions and
-velocities (numpy arrays), so ``observe()`` and friends need no further round trip.
+and talks to the parent over a :func:`multiprocessing.Pipe`. The numbers travel through
+shared memory (:class:`SharedBatch`): the parent writes every game's actions, the workers
+write their games' step outcomes, positions and velocities, and the pipe carries only the
+requests and the few contact events. A step is one round trip: the parent asks every
+worker before collecting any reply, so the workers step in parallel.
 
 Resets cost no round trip of their own. The state of a freshly built world is known in
-advance (bodies at rest at their start or placed positions), so ``reset`` updates the
-parent's copy at once, after validating placements here so that a bad one changes no
-game, and queues the request; the worker applies the queued resets just before its next
-step, taking worlds it built in advance while it was waiting (see
+advance (bodies at rest at their start or placed positions), so ``reset`` writes it at
+once, after validating placements here so that a bad one changes no game, and marks the
+games in shared memory with their new seeds (placements, which are rare, wait to go with
+the next request). The worker applies the marked resets just before its next step, taking
+worlds it rebuilt in advance while it was waiting (see
 :meth:`~.physics.PhysicsCore.build_spare`). Games are independent and their randomness is
 per episode seed, so a ``ProcessCore`` gives exactly the trajectories of a single
 ``PhysicsCore`` of the same size.
@@ -33,13 +35,10 @@ from ..config import Scenario
 from .core import StepOutcome
 from .physics import PhysicsCore, StateViews, placed_positions, start_positions
 
-_TIMEOUT = 0.5
-"""Seconds between liveness checks while waiting for a worker's reply."""
-
 _GC_THRESHOLD = 10_000
 """Allocations between a worker's young-generation collections (Python's default: 700)."""
 
-_FIELDS = ("reward", "terminated", "truncated", "captured", "collisions", "wall_contacts")
+_OUTCOME = ("reward", "terminated", "truncated", "captured", "collisions", "wall_contacts")
 
 Placement = Mapping[str, Sequence[float]] | None
 
@@ -48,12 +47,63 @@ class WorkerError(RuntimeError):
     """A physics worker process died or failed; the message says which and why."""
 
 
-def _serve(conn: Connection, scenario: Scenario, num_envs: int, spares: int) -> None:
-    """A worker's loop: build a core, then apply queued resets and step on each request,
-    building up to ``spares`` fresh worlds for later resets while it waits."""
+class SharedBatch:
+    """The arrays of a batch of ``num_envs`` physics games that the parent and its workers
+    share, in one block of shared memory. The parent writes the pursuers' actions and marks
+    games to reset (``reset``, with their ``seed``); the workers clear those marks and
+    write each field of the step outcome but the events, and the state (positions,
+    velocities). ``views(lo, hi)`` gives numpy views of games ``lo:hi``."""
+
+    def __init__(self, scenario: Scenario, num_envs: int, ctx: Any) -> None:
+        n = scenario.pursuers
+        self.layout: list[tuple[str, np.dtype, tuple[int, ...]]] = [
+            ("actions", np.dtype(np.int64), (n,)),
+            ("seed", np.dtype(np.uint64), ()),
+            ("state", np.dtype(np.float64), (2, n + 1, 2)),
+            ("reward", np.dtype(np.float64), ()),
+            ("collisions", np.dtype(np.int64), ()),
+            ("wall_contacts", np.dtype(np.int64), ()),
+            ("evader_action", np.dtype(np.int64), ()),
+            ("terminated", np.dtype(np.bool_), ()),
+            ("truncated", np.dtype(np.bool_), ()),
+            ("captured", np.dtype(np.bool_), ()),
+            ("reset", np.dtype(np.bool_), ()),
+        ]
+        self.num_envs = num_envs
+        size = sum(_bytes(dtype, num_envs, tail) for _, dtype, tail in self.layout)
+        self.block = ctx.RawArray("b", size)
+
+    def views(self, lo: int = 0, hi: int | None = None) -> dict[str, np.ndarray]:
+        """Numpy views of every field for games ``lo:hi`` (default: all)."""
+        out, offset = {}, 0
+        for name, dtype, tail in self.layout:
+            count = self.num_envs * int(np.prod(tail, dtype=np.int64))
+            whole = np.frombuffer(self.block, dtype, count, offset).reshape(-1, *tail)
+            out[name] = whole[lo:hi]
+            offset += _bytes(dtype, self.num_envs, tail)
+        return out
+
+
+def _bytes(dtype: np.dtype, num_envs: int, tail: tuple[int, ...]) -> int:
+    """Bytes of one field, rounded up to 8 so that every field stays aligned."""
+    size = dtype.itemsize * num_envs * int(np.prod(tail, dtype=np.int64))
+    return -(-size // 8) * 8
+
+
+def _serve(
+    conn: Connection,
+    scenario: Scenario,
+    shared: SharedBatch,
+    games: tuple[int, int],
+    spares: int,
+) -> None:
+    """A worker's loop: build a core for games ``lo:hi``, then apply queued resets and step
+    on each request, building up to ``spares`` fresh worlds for later resets while it waits."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     try:
-        core = PhysicsCore(scenario, num_envs)
+        lo, hi = games
+        core = PhysicsCore(scenario, hi - lo)
+        mine = shared.views(lo, hi)
         # Every rebuild leaves a pymunk space, joints and handlers as cyclic garbage, and
         # allocation-triggered GC runs rescan everything alive. This process only steps
         # worlds: collect rarely, and never rescan what exists now.
@@ -69,18 +119,24 @@ def _serve(conn: Connection, scenario: Scenario, num_envs: int, spares: int) -> 
         while built < spares and not conn.poll(0):  # idle: prepare worlds for resets
             built = core.build_spare()
         try:
-            command, payload = conn.recv()
+            command, placed = conn.recv()
         except EOFError:  # the parent went away
             return
         if command == "close":
             conn.close()
             return
         try:
-            resets, actions = payload
-            for envs, seeds, placed in resets:
-                core.reset(envs, seeds, placed)
-            outcome = core.step(actions)
-            conn.send(("ok", (outcome, core.positions(), core.velocities())))
+            marked = mine["reset"]
+            envs = np.flatnonzero(marked)
+            if len(envs):
+                where = [placed.get(env) for env in envs.tolist()] if placed else None
+                core.reset(envs, mine["seed"][envs], where)
+                marked[envs] = False
+            outcome = core.step(mine["actions"])
+            for name in (*_OUTCOME, "evader_action"):
+                mine[name][:] = getattr(outcome, name)
+            mine["state"][:] = core._state
+            conn.send(("ok", outcome.events))
         except Exception as err:  # report to the parent, which re-raises
             _report(conn, err)
 
@@ -123,14 +179,14 @@ class ProcessCore(StateViews):
         self.t = np.zeros(num_envs, dtype=np.int64)
         self.episode_seed = np.zeros(num_envs, dtype=np.uint64)
         self._start = start_positions(scenario)
-        self._state = np.zeros((num_envs, 2, scenario.pursuers + 1, 2))  # as PhysicsCore's
+        ctx = mp.get_context(start_method)
+        self._shared = SharedBatch(scenario, num_envs, ctx)
+        self._views = self._shared.views()
+        self._state = self._views["state"]  # as PhysicsCore's, written by the workers
         self._state[:, 0] = self._start
         self._slices = np.array_split(np.arange(num_envs), workers)
         self._bounds = np.cumsum([0] + [len(s) for s in self._slices])
-        self._pending: list[list[tuple[np.ndarray, np.ndarray, list[Placement]]]] = [
-            [] for _ in range(workers)
-        ]
-        ctx = mp.get_context(start_method)
+        self._placed: list[dict[int, Placement]] = [{} for _ in range(workers)]
         self._conns: list[Connection] = []
         self._procs: list[Any] = []
         self._closed = False
@@ -139,7 +195,7 @@ class ProcessCore(StateViews):
             ahead = len(games) // 4 + 1 if spares is None else spares
             proc = ctx.Process(
                 target=_serve,
-                args=(child, scenario, len(games), ahead),
+                args=(child, scenario, self._shared, (int(games[0]), int(games[-1]) + 1), ahead),
                 name=f"a2cm-physics-{i}",
                 daemon=True,
             )
@@ -161,19 +217,26 @@ class ProcessCore(StateViews):
         if self._closed:
             raise WorkerError("ProcessCore is closed")
         envs = np.atleast_1d(np.asarray(envs, dtype=np.int64))
-        seeds = np.broadcast_to(np.asarray(seeds, dtype=np.uint64), envs.shape).copy()
+        seeds = np.broadcast_to(np.asarray(seeds, dtype=np.uint64), envs.shape)
         placed = list(positions or ())[: len(envs)]
-        placed += [None] * (len(envs) - len(placed))
-        starts = [placed_positions(self.scenario, p) if p else self._start for p in placed]
-        owner = np.searchsorted(self._bounds, envs, side="right") - 1
-        for w in np.unique(owner).tolist():
-            mine = np.flatnonzero(owner == w)
-            local = envs[mine] - self._bounds[w]
-            self._pending[w].append((local, seeds[mine], [placed[k] for k in mine]))
-        self._state[envs, 0] = starts
+        # validate every placement before changing any game
+        starts = {k: placed_positions(self.scenario, p) for k, p in enumerate(placed) if p}
+        views = self._views
+        views["seed"][envs] = seeds
+        views["reset"][envs] = True
+        self._state[envs, 0] = self._start
         self._state[envs, 1] = 0.0
         self.t[envs] = 0
         self.episode_seed[envs] = seeds
+        if not starts and not any(self._placed):
+            return
+        for k, env in enumerate(envs.tolist()):  # a plain reset drops an earlier placement
+            w = int(np.searchsorted(self._bounds, env, side="right")) - 1
+            if k in starts:
+                self._state[env, 0] = starts[k]
+                self._placed[w][env - int(self._bounds[w])] = placed[k]
+            elif self._placed[w]:
+                self._placed[w].pop(env - int(self._bounds[w]), None)
 
     def step(self, actions: np.ndarray) -> StepOutcome:
         """Advance every game one step; the workers step their slices in parallel."""
@@ -182,25 +245,20 @@ class ProcessCore(StateViews):
         actions = np.asarray(actions)
         if actions.shape[0] != self.num_envs:
             raise ValueError(f"expected actions for {self.num_envs} games, got {actions.shape}")
-        slices = [actions[games] for games in self._slices]  # before sending anything
-        for w, mine in enumerate(slices):
+        self._views["actions"][:] = actions  # before asking any worker
+        for w in range(len(self._conns)):
             try:
-                self._conns[w].send(("step", (self._pending[w], mine)))
+                self._conns[w].send(("step", self._placed[w]))
             except (BrokenPipeError, ConnectionResetError, OSError):
                 raise self._death(w) from None
-            self._pending[w] = []
-        outcomes = []
-        replies = self._gather(range(len(slices)))
-        for w, (outcome, positions, velocities) in enumerate(replies):
-            lo, hi = self._bounds[w], self._bounds[w + 1]
-            self._state[lo:hi, 0], self._state[lo:hi, 1] = positions, velocities
-            outcomes.append(outcome)
+            if self._placed[w]:
+                self._placed[w] = {}
+        events = [game for reply in self._gather(range(len(self._conns))) for game in reply]
         self.t += 1
-        merged = {f: np.concatenate([getattr(o, f) for o in outcomes]) for f in _FIELDS}
+        views = self._views
         return StepOutcome(
-            **merged,
-            evader_action=np.concatenate([o.evader_action for o in outcomes]),
-            events=[game for o in outcomes for game in o.events],
+            **{name: views[name].copy() for name in (*_OUTCOME, "evader_action")},
+            events=events,
         )
 
     # ------------------------------------------------------------------ protocol
@@ -210,12 +268,8 @@ class ProcessCore(StateViews):
         so that no reply is left in a pipe to be mistaken for the next one."""
         replies, error = [], None
         for w in workers:
-            conn, proc = self._conns[w], self._procs[w]
-            try:
-                while not conn.poll(_TIMEOUT):
-                    if not proc.is_alive():
-                        raise self._death(w)
-                status, reply = conn.recv()
+            try:  # a worker that dies closes its end of the pipe: recv raises EOFError
+                status, reply = self._conns[w].recv()
             except (EOFError, ConnectionResetError, OSError):
                 raise self._death(w) from None
             if status == "error":
