@@ -315,6 +315,43 @@ def test_process_core_equals_physics_core_step_for_step():
             np.testing.assert_array_equal(getattr(out_a, field), getattr(out_b, field))
 
 
+def test_process_core_places_agents_like_physics_core():
+    """Placed resets in both workers' games, and a placement that a later plain reset of
+    the same game (before any step) overrides, as in one process."""
+    sc = load_scenario("phys_collision_continue")
+    placed = {"pursuer_0": (2.5, 1.5), "evader": (2.5, 2.5)}
+    requests = [
+        (np.array([0, 3]), np.array([5, 6], dtype=np.uint64), [placed, placed]),
+        (np.array([1]), np.array([7], dtype=np.uint64), [HEAD_ON]),
+        (np.array([1, 2]), np.array([8, 9], dtype=np.uint64), None),  # drops game 1's
+    ]
+    rng = np.random.default_rng(2)
+    actions = rng.integers(0, 4, (25, 4, sc.pursuers))
+    traces = []
+    for core in (ProcessCore(sc, 4, 2), PhysicsCore(sc, 4)):
+        for envs, seeds, where in requests:
+            core.reset(envs, seeds, where)
+        trace = [core.positions()]
+        for step, acts in enumerate(actions):
+            out = core.step(acts)
+            trace.append((core.positions(), out.events, out.reward))
+            if step == 10:  # and once more between steps
+                core.reset(np.array([2]), np.array([11], dtype=np.uint64), [HEAD_ON])
+                trace.append(core.positions())
+        if isinstance(core, ProcessCore):
+            core.close()
+        traces.append(trace)
+    np.testing.assert_array_equal(traces[0][0][1], physics.start_positions(sc))  # overridden
+    np.testing.assert_array_equal(traces[0][0][3, [0, -1]], [(2.5, 1.5), (2.5, 2.5)])
+    for a, b in zip(*traces, strict=True):
+        if isinstance(a, tuple):
+            np.testing.assert_array_equal(a[0], b[0])
+            assert a[1] == b[1]
+            np.testing.assert_array_equal(a[2], b[2])
+        else:
+            np.testing.assert_array_equal(a, b)
+
+
 def test_vector_env_with_workers_equals_one_process():
     sc = load_scenario("phys_collision")
     rng = np.random.default_rng(0)
