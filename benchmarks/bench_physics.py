@@ -3,7 +3,7 @@
 random actions, resetting when an episode ends; plus the batched physics core at B = 64,
 in one process and split across 2 worker processes (``ProcessCore``).
 
-    python benchmarks/bench_physics.py [--repeats 5] [--steps 5000]
+    python benchmarks/bench_physics.py [--repeats 5] [--steps 5000] [--batch-steps 600]
 
 Needs the bench extra (``pip install mpe2``). Figures are medians over interleaved repeats;
 ratios compare runs of the same repeat. Nothing is pinned to a core: the worker figure
@@ -71,7 +71,10 @@ def cpu_seconds(pid: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--steps", type=int, default=5_000)
+    parser.add_argument("--steps", type=int, default=5_000, help="steps of the single games")
+    parser.add_argument(
+        "--batch-steps", type=int, default=600, help=f"steps of the B = {BATCH} batches"
+    )
     args = parser.parse_args()
     warnings.filterwarnings("ignore")
     from mpe2 import simple_tag_v3
@@ -83,7 +86,7 @@ def main() -> None:
     scenario = load_scenario("phys")
     single = PhysicsCore(scenario, BATCH)
     split = ProcessCore(scenario, BATCH, WORKERS)
-    core_steps = max(args.steps // BATCH * 2, 50)
+    core_steps = args.batch_steps
     ours, theirs, batched, workers, per_cpu = [], [], [], [], []
     try:
         for r in range(args.repeats):
@@ -101,7 +104,8 @@ def main() -> None:
     med = statistics.median
     ratio = med(o / t for o, t in zip(ours, theirs, strict=True))
     print(
-        f"command: python benchmarks/bench_physics.py --repeats {args.repeats} --steps {args.steps}"
+        "command: python benchmarks/bench_physics.py "
+        f"--repeats {args.repeats} --steps {args.steps} --batch-steps {args.batch_steps}"
     )
     print(f"(physics.substeps = {scenario.physics.substeps}; medians of {args.repeats} repeats)\n")
     print("| what | median | ratio |")

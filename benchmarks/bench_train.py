@@ -24,9 +24,25 @@ from a2cm_phys.evaluate import model_policy, play
 from a2cm_phys.train import Trainer
 
 
-def train(scenario: str, algo: str, num_envs: int, updates: int, seed: int, record: bool):
+def train(
+    scenario: str,
+    algo: str,
+    num_envs: int,
+    updates: int,
+    seed: int,
+    record: bool,
+    workers: int = 1,
+):
     """One run in a temporary directory: ``(seconds, trainer)``."""
-    cfg = load_train({"algo": algo, "num_envs": num_envs, "updates": updates, "seed": seed})
+    cfg = load_train(
+        {
+            "algo": algo,
+            "num_envs": num_envs,
+            "updates": updates,
+            "seed": seed,
+            "workers": workers,
+        }
+    )
     with tempfile.TemporaryDirectory() as tmp:
         trainer = Trainer(load_scenario(scenario), cfg, tmp, record=record)
         start = time.perf_counter()
@@ -48,6 +64,7 @@ def command(scenario: str, algo: str, num_envs: int, updates: int, extra: str = 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3, help="timing repeats (1-game runs)")
+    parser.add_argument("--phys-repeats", type=int, default=2, help="timing repeats (physics)")
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--updates", type=int, default=5000)
     parser.add_argument("--episodes", type=int, default=5000, help="evaluation episodes")
@@ -84,18 +101,20 @@ def main() -> None:
                     command("grid", algo, 16, u, " --no-record"),
                 )
             )
-        cases = [("grid", 16, True), ("grid", 1, True), ("grid", 1, False)]
+        cases = [("grid", 16, True, 1), ("grid", 1, True, 1), ("grid", 1, False, 1)]
         if importlib.util.find_spec("a2cm_phys.envs.physics") is not None:
-            cases.append(("phys", 16, False))
-        for scenario, envs, record in cases:
-            repeats = 1 if scenario == "phys" else args.repeats
-            secs = [train(scenario, "a2cm", envs, u, s, record)[0] for s in range(repeats)]
+            cases += [("phys", 16, False, 1), ("phys", 16, False, 2)]
+        for scenario, envs, record, workers in cases:
+            repeats = args.phys_repeats if scenario == "phys" else args.repeats
+            secs = [train(scenario, "a2cm", envs, u, s, record, workers)[0] for s in range(repeats)]
             log = "with MCAP log" if record else "no log"
+            extra = ("" if record else " --no-record") + (f" --workers {workers}") * (workers > 1)
             time_rows.append(
                 (
-                    f"a2cm, {scenario}, {envs} game{'s' * (envs > 1)}, {log}",
+                    f"a2cm, {scenario}, {envs} game{'s' * (envs > 1)}, {log}"
+                    + f", {workers} workers" * (workers > 1),
                     secs,
-                    command(scenario, "a2cm", envs, u, "" if record else " --no-record"),
+                    command(scenario, "a2cm", envs, u, extra),
                 )
             )
             print(
