@@ -38,7 +38,17 @@ from .physics import PhysicsCore, StateViews, placed_positions, start_positions
 _GC_THRESHOLD = 10_000
 """Allocations between a worker's young-generation collections (Python's default: 700)."""
 
-_OUTCOME = ("reward", "terminated", "truncated", "captured", "collisions", "wall_contacts")
+_OUTCOME = (
+    "reward",
+    "terminated",
+    "truncated",
+    "captured",
+    "collisions",
+    "wall_contacts",
+    "evader_action",
+)
+"""The fields of :class:`~.core.StepOutcome` that travel through shared memory (all but
+the contact events)."""
 
 Placement = Mapping[str, Sequence[float]] | None
 
@@ -97,8 +107,9 @@ def _serve(
     games: tuple[int, int],
     spares: int,
 ) -> None:
-    """A worker's loop: build a core for games ``lo:hi``, then apply queued resets and step
-    on each request, building up to ``spares`` fresh worlds for later resets while it waits."""
+    """A worker's loop: build a core for games ``lo:hi``, then on each request apply the
+    resets marked in ``shared`` and step, rebuilding up to ``spares`` worlds for later
+    resets while it waits."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     try:
         lo, hi = games
@@ -133,7 +144,7 @@ def _serve(
                 core.reset(envs, mine["seed"][envs], where)
                 marked[envs] = False
             outcome = core.step(mine["actions"])
-            for name in (*_OUTCOME, "evader_action"):
+            for name in _OUTCOME:
                 mine[name][:] = getattr(outcome, name)
             mine["state"][:] = core._state
             conn.send(("ok", outcome.events))
@@ -257,7 +268,7 @@ class ProcessCore(StateViews):
         self.t += 1
         views = self._views
         return StepOutcome(
-            **{name: views[name].copy() for name in (*_OUTCOME, "evader_action")},
+            **{name: views[name].copy() for name in _OUTCOME},
             events=events,
         )
 
