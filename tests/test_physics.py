@@ -315,6 +315,20 @@ def test_process_core_equals_physics_core_step_for_step():
             np.testing.assert_array_equal(getattr(out_a, field), getattr(out_b, field))
 
 
+def test_process_core_shares_its_memory_with_spawned_workers_too():
+    """The shared arrays reach workers started by ``spawn`` (pickled, not inherited)."""
+    sc = load_scenario("phys_flee")
+    seeds = np.arange(3, dtype=np.uint64) + np.uint64(90)
+    with ProcessCore(sc, 3, 2, start_method="spawn") as split:
+        theirs = rollout(split, seeds, 20, 4)
+    ours = rollout(PhysicsCore(sc, 3), seeds, 20, 4)
+    for (pos_a, obs_a, out_a), (pos_b, obs_b, out_b) in zip(theirs, ours, strict=True):
+        np.testing.assert_array_equal(pos_a, pos_b)
+        np.testing.assert_array_equal(obs_a, obs_b)
+        np.testing.assert_array_equal(out_a.reward, out_b.reward)
+        assert out_a.events == out_b.events
+
+
 def test_process_core_places_agents_like_physics_core():
     """Placed resets in both workers' games, and a placement that a later plain reset of
     the same game (before any step) overrides, as in one process."""
