@@ -71,7 +71,8 @@ straight to chipmunk's C functions when this pymunk exposes them, instead of thr
 pymunk's Python wrappers of the same calls. The wrappers add bookkeeping for objects added
 or removed from callbacks, which ours never do, and Python attribute machinery: at 10
 substeps per env step they cost as much as the simulation itself. Trajectories are the
-same bit for bit (tested with this off); building a world uses the public API only."""
+same bit for bit (tested with this off). Creating pymunk objects and adding them to or
+removing them from spaces always goes through pymunk's API."""
 
 _HANDLED = (
     (CollisionType.PURSUER, CollisionType.PURSUER),
@@ -105,7 +106,7 @@ class World:
     that was never used is tested). What the reused objects carry is reset explicitly:
     positions and velocities, and chipmunk's position-correction velocity, which is cleared
     by integrating positions over ``dt = 0``. Forces, angles and spins need nothing: no force
-    is ever applied and rotation is locked. Rebuilding this way costs about half of
+    is ever applied and rotation is locked. Rebuilding this way costs a third to a half of
     building every object anew and collecting the old ones, which is mostly pymunk's
     per-object Python bookkeeping (measured in ``BENCHMARKS.md``).
 
