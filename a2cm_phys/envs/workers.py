@@ -169,7 +169,7 @@ class ProcessCore(StateViews):
     :class:`WorkerError` naming it and its exit code at the next call. ``start_method`` is
     multiprocessing's (default: the platform's; ``spawn`` and ``forkserver`` need the
     usual ``if __name__ == "__main__":`` guard in the calling script). ``spares`` is how
-    many fresh worlds each worker builds ahead while idle (default: a quarter of its games,
+    many worlds each worker rebuilds ahead while idle (default: a quarter of its games,
     plus one; see :meth:`PhysicsCore.build_spare`).
     """
 
