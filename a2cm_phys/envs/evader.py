@@ -6,7 +6,8 @@ its random numbers in one vectorised operation, and any single episode is reprod
 exactly from its seed, in any batch, in any order — which is what ``replay --verify`` and
 the batched-vs-single property tests rely on. Being counter-based, the draws can also be
 computed ahead: :class:`Evader` (what the cores use) fills each game's next draws in one
-vectorised call, and the functions below are its step-by-step reference.
+vectorised call; :func:`random_actions` and :func:`flee_actions` are the step-by-step
+policies it reproduces.
 """
 
 from __future__ import annotations
@@ -105,13 +106,11 @@ def evader_actions(
     """The evader's action in every game, by the scenario's evader policy.
 
     Positions (``(B, 2)`` and ``(B, N, 2)``) are read only by ``flee`` and may be ``None``
-    otherwise; ``[low, high]`` is the range the arena clips positions to.
+    otherwise; ``[low, high]`` is the range the arena clips positions to. This is
+    :class:`Evader` without look-ahead: each call hashes step ``t`` itself.
     """
-    if scenario.evader == "random":
-        return random_actions(seed, t, scenario.actions)
-    if scenario.evader == "flee":
-        return flee_actions(seed, t, evader_xy, pursuer_xy, scenario.actions, low, high)
-    return np.full(len(seed), STAY, dtype=np.int64)
+    evader = Evader(scenario, len(seed), low, high, horizon=1)
+    return evader.moves(seed, t, evader_xy, pursuer_xy)
 
 
 class Evader:

@@ -26,6 +26,7 @@ import multiprocessing as mp
 import signal
 import traceback
 from collections.abc import Mapping, Sequence
+from dataclasses import fields
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -38,15 +39,7 @@ from .physics import PhysicsCore, StateViews, placed_positions, start_positions
 _GC_THRESHOLD = 10_000
 """Allocations between a worker's young-generation collections (Python's default: 700)."""
 
-_OUTCOME = (
-    "reward",
-    "terminated",
-    "truncated",
-    "captured",
-    "collisions",
-    "wall_contacts",
-    "evader_action",
-)
+_OUTCOME = tuple(f.name for f in fields(StepOutcome) if f.name != "events")
 """The fields of :class:`~.core.StepOutcome` that travel through shared memory (all but
 the contact events)."""
 
