@@ -288,11 +288,19 @@ def test_direct_calls_are_bit_identical_to_pymunks_api(monkeypatch):
         cp.cpBodyGetPosition,
         cp.cpBodyGetVelocity,
     ]
+    # The contact callbacks find their shapes without pymunk's Arbiter.shapes.
+    lookups = []
+    shapes = pymunk.Arbiter.shapes
+    counted = property(lambda arbiter: lookups.append(1) or shapes.fget(arbiter))
+    monkeypatch.setattr(pymunk.Arbiter, "shapes", counted)
     fast = rollout(fast_core, seeds, 300, 2)
+    assert sum(len(game) for _, _, out in fast for game in out.events) > 20
+    assert not lookups
     monkeypatch.setattr(physics, "DIRECT_CALLS", False)
     slow_core = PhysicsCore(sc, 3)
     assert not isinstance(slow_core._worlds[0].step, partial)  # pymunk's own Space.step
     slow = rollout(slow_core, seeds, 300, 2)
+    assert lookups
     for (pos_a, _, out_a), (pos_b, _, out_b) in zip(fast, slow, strict=True):
         np.testing.assert_array_equal(pos_a, pos_b)
         assert out_a.events == out_b.events

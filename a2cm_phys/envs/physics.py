@@ -52,7 +52,9 @@ from .evader import STAY, Evader
 
 
 class CollisionType(IntEnum):
-    """pymunk collision types of the shapes; contact handlers are keyed on pairs of them."""
+    """pymunk collision types of the shapes. Our one contact handler is a wildcard that tells
+    shapes apart by identity; the types say what a shape is, to pymunk's debug tools and to
+    handlers a user adds for a pair of them."""
 
     PURSUER = 1
     EVADER = 2
@@ -66,20 +68,14 @@ for pixels and would let 0.6 m boxes sink 10 cm into each other."""
 Callback = Callable[[pymunk.Arbiter, pymunk.Space, Any], None]
 
 DIRECT_CALLS = True
-"""Make the frequent calls (stepping a space, steering a servo, reading and placing a body)
-straight to chipmunk's C functions when this pymunk exposes them, instead of through
-pymunk's Python wrappers of the same calls. The wrappers add bookkeeping for objects added
-or removed from callbacks, which ours never do, and Python attribute machinery: at 10
-substeps per env step they cost as much as the simulation itself. Trajectories are the
-same bit for bit (tested with this off). Creating pymunk objects and adding them to or
-removing them from spaces always goes through pymunk's API."""
-
-_HANDLED = (
-    (CollisionType.PURSUER, CollisionType.PURSUER),
-    (CollisionType.PURSUER, CollisionType.EVADER),
-    (CollisionType.PURSUER, CollisionType.WALL),
-    (CollisionType.EVADER, CollisionType.WALL),
-)
+"""Make the frequent calls (stepping a space, steering a servo, reading and placing a body,
+finding a contact's two shapes) straight to chipmunk's C functions when this pymunk exposes
+them, instead of through pymunk's Python wrappers of the same calls. The wrappers add
+bookkeeping for objects added or removed from callbacks, which ours never do, and Python
+attribute machinery and allocations: at 10 substeps per env step they cost as much as the
+simulation itself. Trajectories are the same bit for bit (tested with this off). Creating
+pymunk objects and adding them to or removing them from spaces always goes through pymunk's
+API."""
 
 
 def _pair_table(scenario: Scenario) -> list[list[Pair]]:
@@ -220,8 +216,10 @@ class World:
         self.commands = [STAY] * len(self.bodies)
         self.tracker.clear()
         begin, separate = self._callbacks
-        for a, b in _HANDLED:
-            space.on_collision(a, b, begin=begin, separate=separate)
+        # One wildcard handler: the pairs that can touch are exactly the ones we record
+        # (pursuer-pursuer, pursuer-evader, agent-wall; static walls never touch each
+        # other and there is one evader), and one handler costs a quarter of four.
+        space.on_collision(begin=begin, separate=separate)
         self.space = space
         self.step: Callable[[float], None] = _stepper(space)
 
@@ -249,17 +247,37 @@ def _access(body: pymunk.Body, attr: str, write: bool) -> Callable[..., Any]:
 def _callbacks(
     tracker: ContactTracker, table: list[list[Pair]], tags: dict[pymunk.Shape, int]
 ) -> tuple[Callback, Callback]:
-    """The begin/separate callbacks of one space: they only record into ``tracker``."""
+    """The begin/separate callbacks of one space: they only record into ``tracker``.
 
-    def begin(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+    Each looks up the pair of the arbiter's two shapes, through chipmunk's
+    ``cpArbiterGetShapes`` into buffers made once (see :data:`DIRECT_CALLS`), or through
+    :attr:`pymunk.Arbiter.shapes`, which allocates both buffers and two pymunk lookups
+    per call."""
+    get_shapes = getattr(pymunk.cp, "cpArbiterGetShapes", None)
+    if DIRECT_CALLS and get_shapes is not None and all(hasattr(s, "_shape") for s in tags):
+        out_a, out_b = pymunk.ffi.new("cpShape *[1]"), pymunk.ffi.new("cpShape *[1]")
+        rows = {shape._shape: table[tag] for shape, tag in tags.items()}  # C pointers hash
+        cols = {shape._shape: tag for shape, tag in tags.items()}
+
+        def begin(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+            get_shapes(arbiter._arbiter, out_a, out_b)
+            tracker.begin(rows[out_a[0]][cols[out_b[0]]])
+
+        def separate(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+            get_shapes(arbiter._arbiter, out_a, out_b)
+            tracker.separate(rows[out_a[0]][cols[out_b[0]]])
+
+        return begin, separate
+
+    def begin_(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         a, b = arbiter.shapes
         tracker.begin(table[tags[a]][tags[b]])
 
-    def separate(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+    def separate_(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         a, b = arbiter.shapes
         tracker.separate(table[tags[a]][tags[b]])
 
-    return begin, separate
+    return begin_, separate_
 
 
 def start_positions(scenario: Scenario) -> np.ndarray:
