@@ -1,9 +1,10 @@
 """Physics-mode speed: one game through ``make_env("phys")`` vs mpe2's ``simple_tag_v3``
 (3 adversaries chase 1 good agent, no obstacles; also a 2-D physics toy) in one process,
-random actions, resetting when an episode ends; plus the batched physics core at B = 64,
-in one process and split across 2 worker processes (``ProcessCore``).
+random actions, resetting when an episode ends; plus the batched physics core at B = 64
+(``--batch``), in one process and split across 2 worker processes (``ProcessCore``).
 
     python benchmarks/bench_physics.py [--repeats 5] [--steps 5000] [--batch-steps 600]
+                                       [--batch 64]
 
 Needs the bench extra (``pip install mpe2``). Figures are medians over interleaved repeats;
 ratios compare runs of the same repeat. Nothing is pinned to a core: the worker figure
@@ -25,7 +26,7 @@ from a2cm_phys.config import load_scenario
 from a2cm_phys.envs.physics import PhysicsCore
 from a2cm_phys.envs.workers import ProcessCore
 
-BATCH, WORKERS = 64, 2
+WORKERS = 2
 
 
 def steps_per_second_parallel(env, steps: int, seed: int, n_actions: int) -> float:
@@ -72,9 +73,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--steps", type=int, default=5_000, help="steps of the single games")
-    parser.add_argument(
-        "--batch-steps", type=int, default=600, help=f"steps of the B = {BATCH} batches"
-    )
+    parser.add_argument("--batch-steps", type=int, default=600, help="steps of the batched cores")
+    parser.add_argument("--batch", type=int, default=64, help="games B of the batched cores")
     args = parser.parse_args()
     warnings.filterwarnings("ignore")
     from mpe2 import simple_tag_v3
@@ -84,8 +84,8 @@ def main() -> None:
     )
     ours_env = make_env("phys")
     scenario = load_scenario("phys")
-    single = PhysicsCore(scenario, BATCH)
-    split = ProcessCore(scenario, BATCH, WORKERS)
+    single = PhysicsCore(scenario, args.batch)
+    split = ProcessCore(scenario, args.batch, WORKERS)
     core_steps = args.batch_steps
     ours, theirs, batched, workers, per_cpu = [], [], [], [], []
     try:
@@ -105,7 +105,8 @@ def main() -> None:
     ratio = med(o / t for o, t in zip(ours, theirs, strict=True))
     print(
         "command: python benchmarks/bench_physics.py "
-        f"--repeats {args.repeats} --steps {args.steps} --batch-steps {args.batch_steps}"
+        f"--repeats {args.repeats} --steps {args.steps} --batch-steps {args.batch_steps} "
+        f"--batch {args.batch}"
     )
     print(f"(physics.substeps = {scenario.physics.substeps}; medians of {args.repeats} repeats)\n")
     print("| what | median | ratio |")
@@ -113,8 +114,15 @@ def main() -> None:
     mpe = "mpe2 simple_tag_v3 (3 adversaries, 1 good, no obstacles)"
     print(f"| {mpe} | {med(theirs):,.0f} steps/s | 1.0 |")
     print(f"| a2cm_phys make_env('phys'), one game | {med(ours):,.0f} steps/s | {ratio:.2f}x |")
-    print(f"| PhysicsCore B={BATCH}, one process | {med(batched):,.0f} env-steps/s | |")
-    print(f"| ProcessCore B={BATCH}, {WORKERS} workers | {med(workers):,.0f} env-steps/s | |")
+    b = args.batch
+    # The batched rows' ratios are to mpe2's one game, in the same repeat: a figure of
+    # this machine's speed at the time, which moves by a quarter between runs.
+    one = med(o / t for o, t in zip(batched, theirs, strict=True))
+    two = med(o / t for o, t in zip(workers, theirs, strict=True))
+    print(f"| PhysicsCore B={b}, one process | {med(batched):,.0f} env-steps/s | {one:.2f}x |")
+    print(
+        f"| ProcessCore B={b}, {WORKERS} workers | {med(workers):,.0f} env-steps/s | {two:.2f}x |"
+    )
     print(
         f"\nProcessCore workers: {med(per_cpu):,.0f} env-steps per worker CPU-second "
         f"(x {WORKERS}: the most {WORKERS} free cores could give); load average now: "
