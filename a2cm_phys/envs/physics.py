@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from enum import IntEnum
-from functools import partial
+from functools import cache, partial
 from itertools import combinations
 from typing import Any
 
@@ -254,7 +254,10 @@ def _callbacks(
     :attr:`pymunk.Arbiter.shapes`, which allocates both buffers and two pymunk lookups
     per call."""
     get_shapes = getattr(pymunk.cp, "cpArbiterGetShapes", None)
-    if DIRECT_CALLS and get_shapes is not None and all(hasattr(s, "_shape") for s in tags):
+    direct = (
+        get_shapes is not None and _arbiter_handle() and all(hasattr(s, "_shape") for s in tags)
+    )
+    if DIRECT_CALLS and direct:
         out_a, out_b = pymunk.ffi.new("cpShape *[1]"), pymunk.ffi.new("cpShape *[1]")
         rows = {shape._shape: table[tag] for shape, tag in tags.items()}  # C pointers hash
         cols = {shape._shape: tag for shape, tag in tags.items()}
@@ -278,6 +281,15 @@ def _callbacks(
         tracker.separate(table[tags[a]][tags[b]])
 
     return begin_, separate_
+
+
+@cache
+def _arbiter_handle() -> bool:
+    """Whether this pymunk's :class:`pymunk.Arbiter` keeps chipmunk's handle as ``_arbiter``
+    (asked of a dummy arbiter: a callback failing on it would not raise, since cffi only
+    prints the exceptions raised in callbacks)."""
+    ffi = getattr(pymunk, "ffi", None)
+    return ffi is not None and hasattr(pymunk.Arbiter(ffi.NULL, None), "_arbiter")
 
 
 def start_positions(scenario: Scenario) -> np.ndarray:
