@@ -3,6 +3,8 @@ determinism, the process-split core and the public API conformance suites."""
 
 from __future__ import annotations
 
+import os
+import signal
 from functools import partial
 
 import numpy as np
@@ -391,6 +393,25 @@ def test_vector_env_with_workers_equals_one_process():
         runs.append((np.stack(obs), episodes))
     np.testing.assert_array_equal(runs[0][0], runs[1][0])
     assert runs[0][1] == runs[1][1] and runs[0][1]  # the same finished episodes, some
+
+
+def test_process_core_stops_a_worker_that_does_not_answer():
+    sc = load_scenario("phys")
+    with pytest.raises(ValueError, match="timeout"):
+        ProcessCore(sc, 2, 2, timeout=0)
+    core = ProcessCore(sc, 4, 2, timeout=0.5)
+    try:
+        actions = np.zeros((4, sc.pursuers), dtype=np.int64)
+        core.step(actions)
+        hung = core._procs[0]
+        os.kill(hung.pid, signal.SIGSTOP)  # alive, but it will never answer
+        with pytest.raises(WorkerError, match=r"worker 0 .* did not answer within 0.5 s"):
+            core.step(actions)
+        assert not hung.is_alive()  # killed: SIGTERM stays pending while it is stopped
+        with pytest.raises(WorkerError, match="closed"):
+            core.step(actions)
+    finally:
+        core.close()
 
 
 def test_process_core_reports_bad_positions_and_worker_death():

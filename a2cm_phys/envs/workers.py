@@ -159,7 +159,9 @@ class ProcessCore(StateViews):
 
     Call :meth:`close` (or use it as a context manager) to stop the workers; they are
     daemons, so they also end with the parent. A worker that dies raises
-    :class:`WorkerError` naming it and its exit code at the next call. ``start_method`` is
+    :class:`WorkerError` naming it and its exit code at the next call, and so does one that
+    is alive but has not answered for ``timeout`` seconds (``None``: wait for ever); either
+    way the core is closed. ``start_method`` is
     multiprocessing's (default: the platform's; ``spawn`` and ``forkserver`` need the
     usual ``if __name__ == "__main__":`` guard in the calling script). ``spares`` is how
     many worlds each worker rebuilds ahead while idle (default: a quarter of its games,
@@ -173,13 +175,17 @@ class ProcessCore(StateViews):
         workers: int,
         start_method: str | None = None,
         spares: int | None = None,
+        timeout: float | None = 120.0,
     ) -> None:
         if scenario.mode != "physics":
             raise ValueError(f"ProcessCore needs a physics scenario, got mode={scenario.mode!r}")
         if not 1 <= workers <= num_envs:
             raise ValueError(f"workers must be in [1, num_envs={num_envs}], got {workers}")
+        if timeout is not None and not timeout > 0:
+            raise ValueError(f"timeout must be positive seconds or None, got {timeout!r}")
         self.scenario = scenario
         self.num_envs = num_envs
+        self.timeout = timeout
         self.t = np.zeros(num_envs, dtype=np.int64)
         self.episode_seed = np.zeros(num_envs, dtype=np.uint64)
         self._start = start_positions(scenario)
@@ -272,8 +278,11 @@ class ProcessCore(StateViews):
         so that no reply is left in a pipe to be mistaken for the next one."""
         replies, error = [], None
         for w in workers:
+            conn = self._conns[w]
             try:  # a worker that dies closes its end of the pipe: recv raises EOFError
-                status, reply = self._conns[w].recv()
+                if self.timeout is not None and not conn.poll(self.timeout):
+                    raise self._silence(w)
+                status, reply = conn.recv()
             except (EOFError, ConnectionResetError, OSError):
                 raise self._death(w) from None
             if status == "error":
@@ -294,6 +303,15 @@ class ProcessCore(StateViews):
             f"{proc.exitcode}; the ProcessCore is closed, make a new one"
         )
 
+    def _silence(self, worker: int) -> WorkerError:
+        proc = self._procs[worker]
+        self.close()
+        return WorkerError(
+            f"physics worker {worker} ({proc.name}, pid {proc.pid}) did not answer within "
+            f"{self.timeout:g} s (the ProcessCore's timeout); it was stopped and the "
+            "ProcessCore is closed, make a new one"
+        )
+
     # ------------------------------------------------------------------ lifetime
 
     def close(self) -> None:
@@ -308,6 +326,9 @@ class ProcessCore(StateViews):
             proc.join(timeout=2.0)
             if proc.is_alive():
                 proc.terminate()
+                proc.join(timeout=1.0)
+            if proc.is_alive():  # a stopped process keeps SIGTERM pending
+                proc.kill()
                 proc.join(timeout=1.0)
         for conn in self._conns:
             conn.close()
