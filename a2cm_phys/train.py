@@ -68,6 +68,16 @@ def check_seed(cfg: Train) -> None:
         raise ConfigError(f"training options: key 'seed': must be >= 0, got {cfg.seed}")
 
 
+def check_workers(scenario: Scenario, cfg: Train) -> None:
+    """A physics run splits its games across ``workers`` processes, so it needs at least as
+    many games: a :class:`ConfigError` if not (grid mode ignores ``workers``)."""
+    if scenario.mode == "physics" and cfg.workers > cfg.num_envs:
+        raise ConfigError(
+            f"training options: key 'workers': {cfg.workers} processes for num_envs="
+            f"{cfg.num_envs} games; use at most num_envs workers (or more --num-envs)"
+        )
+
+
 def policy_rng(seed: int) -> np.random.Generator:
     """The action-sampling generator of a run, independent of the env's seed stream."""
     return np.random.default_rng([seed, 1])
@@ -101,6 +111,7 @@ class Trainer:
         checkpoint_every: int = 0,
     ) -> None:
         check_seed(cfg)
+        check_workers(scenario, cfg)
         torch.set_num_threads(cfg.threads)
         self.scenario, self.cfg, self.run_dir = scenario, cfg, Path(run_dir)
         self.record, self.log_every, self.scene_every = record, log_every, scene_every
@@ -464,6 +475,7 @@ def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
     flags = {k: getattr(args, k) for k in _TRAIN_FLAGS if getattr(args, k) is not None}
     cfg = load_train({**train_set, **flags})
     check_seed(cfg)  # before the run directory exists
+    check_workers(scenario, cfg)
     if args.run_dir:
         run_dir = Path(args.run_dir)
         if (run_dir / checkpoint.CHECKPOINT_NAME).exists():

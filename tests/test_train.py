@@ -197,6 +197,7 @@ def test_every_scenario_trains_a_few_updates(tmp_path: Path, name: str) -> None:
         (["--scenario", "grid", "--lr", "-1"], "lr"),
         (["--scenario", "grid", "--num-envs", "3"], "multiple of num_envs"),
         (["--scenario", "grid", "--seed", "-1"], "seed"),
+        (["--scenario", "phys", "--workers", "2"], "'workers': 2 processes for num_envs=1"),
         (["--updates", "3"], "--scenario is required"),
         (["--resume", "does/not/exist"], "no checkpoint"),
     ],
