@@ -263,6 +263,20 @@ def test_a_rebuilt_world_is_a_new_world():
         ), f"episode {episode}"
 
 
+def test_servos_read_only_the_control_bodies_velocity():
+    """The control bodies stay outside the space, so their positions never move: the servo
+    joints must not depend on them (anchors at the centres, max_bias = 0)."""
+    sc = load_scenario("phys_collision_continue")
+    table, start = physics._pair_table(sc), physics.start_positions(sc)
+    actions = np.random.default_rng(5).integers(0, 5, (40, sc.pursuers + 1))
+    actions[:15] = RIGHT  # a pile-up against the right wall first
+    moved = physics.World(sc, start, table)
+    assert all(control.space is None for control in moved.controls)
+    for i, control in enumerate(moved.controls):
+        control.position = (40.0 + i, -7.0 * i)  # far from the bodies they drive
+    assert play_world(moved, actions) == play_world(physics.World(sc, start, table), actions)
+
+
 def test_worlds_built_ahead_are_the_same_as_worlds_built_at_reset():
     sc = load_scenario("phys_flee")
     seeds = np.arange(4, dtype=np.uint64) + np.uint64(70)
