@@ -2,8 +2,8 @@
 
 Walls are four static boxes outside ``[0, size]²`` (inner edges on the boundary), pursuers
 dynamic square boxes, the evader a dynamic disc, all with rotation locked. Each agent is
-driven by a *velocity servo* (pymunk's tank-example idiom): a kinematic control body moving
-at the commanded velocity, pinned to the agent by a :class:`pymunk.PivotJoint` with
+driven by a *velocity servo* (pymunk's tank-example idiom): a kinematic control body given
+the commanded velocity, pinned to the agent by a :class:`pymunk.PivotJoint` with
 ``max_bias = 0`` (no position correction: it only matches velocities) and ``max_force =
 physics.max_force``. The joint pulls the agent up to speed and holds it there like floor
 friction, while the contact solver, which is not force-limited, stops agents at walls and
@@ -253,10 +253,12 @@ def _callbacks(
     :attr:`pymunk.Arbiter.shapes`, which allocates both buffers and two pymunk lookups
     per call."""
     get_shapes = getattr(pymunk.cp, "cpArbiterGetShapes", None)
-    direct = (
-        get_shapes is not None and _arbiter_handle() and all(hasattr(s, "_shape") for s in tags)
-    )
-    if DIRECT_CALLS and direct:
+    if (
+        DIRECT_CALLS
+        and get_shapes is not None
+        and _arbiter_handle()
+        and all(hasattr(shape, "_shape") for shape in tags)
+    ):
         out_a, out_b = pymunk.ffi.new("cpShape *[1]"), pymunk.ffi.new("cpShape *[1]")
         rows = {shape._shape: table[tag] for shape, tag in tags.items()}  # C pointers hash
         cols = {shape._shape: tag for shape, tag in tags.items()}
