@@ -176,6 +176,34 @@ class Train:
         return self.batch_size // self.num_envs
 
 
+PRESETS: dict[str, dict[str, Any]] = {
+    "paper": {
+        "num_envs": 1,
+        "batch_size": 128,
+        "updates": 5000,
+        "lr": 7e-3,
+        "rmsprop_alpha": 0.9,
+        "rmsprop_eps": 1e-7,
+        "gamma": 0.99,
+        "entropy_coef": 1e-4,
+        "value_coef": 0.5,
+        "hidden": 128,
+        "reward_scale": 1.0,
+        "max_grad_norm": 0.0,
+    },
+}
+"""Named sets of :class:`Train` values (``--preset NAME``). ``paper`` is the paper's exact
+method (SPEC §6): RMSprop 7e-3 (Keras rho 0.9, eps 1e-7), one game, plain eq. 13 returns,
+raw rewards. Explicit options given beside a preset win over it."""
+
+
+def preset(name: str) -> dict[str, Any]:
+    """The :class:`Train` values of preset ``name``; a :class:`ConfigError` if unknown."""
+    if name not in PRESETS:
+        raise ConfigError(f"--preset: unknown preset {name!r} (presets: {', '.join(PRESETS)})")
+    return dict(PRESETS[name])
+
+
 class _KeyError(ValueError):
     """Internal: a validation failure carrying the dotted key it concerns."""
 

@@ -26,7 +26,7 @@ from .config import ConfigError, Scenario, build, load_scenario, load_train
 from .envs.vector import VectorEnv
 from .rollout import Policy
 from .stats import describe
-from .train import policy_rng
+from .trainer import policy_rng
 
 
 @dataclass
