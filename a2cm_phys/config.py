@@ -20,8 +20,9 @@ from typing import Any, Literal
 
 import tomllib
 
-SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
-"""Folder of the named scenarios shipped with the package (``scenarios/*.toml``)."""
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+"""Folder of the named scenarios, package data of ``a2cm_phys`` (so a wheel has them too);
+the checkout's top-level ``scenarios/`` is a symbolic link to it."""
 
 Mode = Literal["grid", "physics"]
 EvaderPolicy = Literal["random", "flee", "static"]
