@@ -100,6 +100,7 @@ class Scenario:
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of the first impossible value."""
+        check_limits(self, SCENARIO_LIMITS)
         if self.size < 2:
             raise _KeyError("size", f"must be >= 2, got {self.size}")
         border = 4 * (self.size - 1)
@@ -152,6 +153,7 @@ class Train:
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of the first impossible value."""
+        check_limits(self, TRAIN_LIMITS)
         for key in ("updates", "batch_size", "num_envs", "hidden", "threads", "workers"):
             if getattr(self, key) < 1:
                 raise _KeyError(key, f"must be >= 1, got {getattr(self, key)}")
@@ -203,6 +205,36 @@ def preset(name: str) -> dict[str, Any]:
     if name not in PRESETS:
         raise ConfigError(f"--preset: unknown preset {name!r} (presets: {', '.join(PRESETS)})")
     return dict(PRESETS[name])
+
+
+SCENARIO_LIMITS: dict[str, tuple[int, str]] = {
+    "size": (1000, "the arena's tables and pictures grow with size²"),
+    "pursuers": (64, "one actor per pursuer, each observing every agent"),
+    "max_steps": (1_000_000, "an episode's log is buffered in memory until it ends"),
+}
+"""Largest values a scenario may ask for, with the reason: beyond them memory runs out."""
+
+TRAIN_LIMITS: dict[str, tuple[int, str]] = {
+    "num_envs": (65_536, "every game's state is held in memory"),
+    "batch_size": (1 << 20, "a batch is held in memory"),
+    "hidden": (16_384, "the networks' weights are held in memory"),
+    "threads": (256, "each torch thread needs memory of its own"),
+    "workers": (256, "each worker is a process"),
+    "seed": (2**64 - 1, "seeds feed 64-bit generators"),
+}
+"""Largest training values, with the reason."""
+
+
+
+def check_limits(obj: Any, limits: Mapping[str, tuple[int, str]]) -> None:
+    """Raise ``ValueError`` naming the key of the first value above its limit, or (for a
+    scenario) a ``name`` that is not a plain file name (run directories are named after it)."""
+    for key, (limit, why) in limits.items():
+        if getattr(obj, key) > limit:
+            raise _KeyError(key, f"must be at most {limit:,} ({why}), got {getattr(obj, key):,}")
+    name = getattr(obj, "name", None)
+    if name is not None and (not name or name[0] == "." or set(name) & set("/\\\0")):
+        raise _KeyError("name", f"must be a file name (no /, \\, no leading '.'), got {name!r}")
 
 
 class _KeyError(ValueError):
