@@ -2,7 +2,10 @@
 
 The batch is a dict of preallocated numpy arrays keyed as the learner reads them
 (:data:`~a2cm_phys.algos.learner.BATCH_KEYS`); :func:`collect` overwrites it in place each
-update, so the rollout loop allocates nothing of its own.
+update, so the rollout loop allocates nothing of its own. Actions are stored with the shape
+and dtype of the policy's distribution (int64 indices, or float32 velocity commands), and
+the raw team reward is stored beside its components (``reward_parts``) for learners that
+value them apart.
 """
 
 from __future__ import annotations
@@ -11,21 +14,46 @@ from collections.abc import Callable
 
 import numpy as np
 
+from .config import Scenario
+from .envs.core import StepOutcome
 from .envs.vector import EpisodeSummary, VecStep, VectorEnv
 
 Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
-"""``policy(obs (B, obs_dim), rng) -> actions (B, N)`` int64."""
+"""``policy(obs (B, obs_dim), rng) -> actions (B, N, *action_shape)``."""
 
 StepHook = Callable[[np.ndarray, VecStep], None]
 """``hook(actions, step)``, called after every vector step (e.g. the episode recorder)."""
 
+REWARD_PARTS = ("time", "collision")
+"""The team reward's components (SPEC §4): ``time`` is the step reward with the capture and
+wall terms, ``collision`` the collision penalty (zero in ``off`` mode)."""
 
-def allocate_batch(steps: int, num_envs: int, obs_dim: int, n_agents: int) -> dict[str, np.ndarray]:
+
+def reward_parts(scenario: Scenario, outcome: StepOutcome, out: np.ndarray) -> None:
+    """Write the step's reward split into :data:`REWARD_PARTS` into ``out (B, 2)``.
+
+    The parts sum to the team reward (the collision part is exact; the time part is the
+    rest, so the sum equals ``outcome.reward`` up to float rounding of the subtraction).
+    """
+    weight = scenario.rewards.collision if scenario.collisions.mode != "off" else 0.0
+    np.multiply(outcome.collisions, weight, out=out[:, 1])
+    np.subtract(outcome.reward, out[:, 1], out=out[:, 0])
+
+
+def allocate_batch(
+    steps: int,
+    num_envs: int,
+    obs_dim: int,
+    n_agents: int,
+    action_shape: tuple[int, ...] = (),
+    action_dtype: np.dtype | type = np.int64,
+) -> dict[str, np.ndarray]:
     """Zeroed arrays for ``steps`` vector steps of ``num_envs`` games (time-major)."""
     return {
         "obs": np.zeros((steps, num_envs, obs_dim), dtype=np.float32),
-        "actions": np.zeros((steps, num_envs, n_agents), dtype=np.int64),
+        "actions": np.zeros((steps, num_envs, n_agents, *action_shape), dtype=action_dtype),
         "rewards": np.zeros((steps, num_envs), dtype=np.float64),
+        "reward_parts": np.zeros((steps, num_envs, len(REWARD_PARTS)), dtype=np.float64),
         "terminated": np.zeros((steps, num_envs), dtype=bool),
         "truncated": np.zeros((steps, num_envs), dtype=bool),
         "final_obs": np.zeros((steps, num_envs, obs_dim), dtype=np.float32),
@@ -48,6 +76,8 @@ def collect(
     """
     b_obs, b_actions, b_rewards = batch["obs"], batch["actions"], batch["rewards"]
     b_term, b_trunc, b_final = batch["terminated"], batch["truncated"], batch["final_obs"]
+    b_parts = batch["reward_parts"]
+    scenario = env.scenario
     episodes: list[EpisodeSummary] = []
     for t in range(len(b_obs)):
         b_obs[t] = obs
@@ -55,6 +85,7 @@ def collect(
         step = env.step(actions, validate=False)
         b_actions[t] = actions
         b_rewards[t] = step.reward
+        reward_parts(scenario, step.outcome, b_parts[t])
         b_term[t] = step.terminated
         b_trunc[t] = step.truncated
         b_final[t] = step.final_obs

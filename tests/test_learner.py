@@ -1,19 +1,19 @@
-"""Learner: gradient flow, A2C/A2CM advantage wiring, NaN guard, resume, a bandit, and the
-numpy fast path against a plain float64 reference and the torch backend."""
+"""Learner: gradient flow, A2C/A2CM advantage wiring, NaN guard, resume, bandits (discrete
+and Gaussian), the loss against a plain float64 reference, and the pieces of issue 12:
+GAE, advantage normalisation, PopArt value normalisation and split reward components."""
 
 from __future__ import annotations
 
 import copy
 import dataclasses
-import io
 
 import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
-from threadpoolctl import threadpool_info
 from torch.distributions import Categorical
 
+from a2cm_phys.algos.distributions import GaussianActions
 from a2cm_phys.algos.learner import Learner, NonFiniteLoss
 from a2cm_phys.algos.models import ActorCritic, StackedLinear
 from a2cm_phys.config import Train
@@ -206,7 +206,7 @@ def test_train_defaults_are_keras_rmsprop() -> None:
     assert dataclasses.asdict(Train())["gamma"] == 0.99
 
 
-# --------------------------------------------------------------------- numpy fast path
+# --------------------------------------------------------------------- against a reference
 def trainer_batch(t: int = 8, b: int = 16, seed: int = 0) -> dict[str, np.ndarray]:
     """A random batch in the trainer's own arrays and dtypes, with episode ends of each kind."""
     rng = np.random.default_rng(seed)
@@ -285,105 +285,109 @@ def reference_loss(
     return metrics, grads
 
 
-@pytest.mark.parametrize("backend", ["numpy", "torch"])
 @pytest.mark.parametrize("algo", ["a2c", "a2cm"])
-def test_loss_and_gradients_match_a_float64_reference(algo: str, backend: str) -> None:
+def test_loss_and_gradients_match_a_float64_reference(algo: str) -> None:
     cfg = Train(algo=algo, reward_scale=0.5, entropy_coef=0.05)
     for seed in range(3):
         m = model(algo, seed=seed, hidden=128)
         batch = trainer_batch(seed=seed)
         ref_metrics, ref_grads = reference_loss(m, batch, cfg)
-        learner = Learner(m, cfg, backend=backend)
-        assert learner.active_backend == backend
+        learner = Learner(m, cfg)
         metrics = learner.update(batch)
         assert metrics == pytest.approx(ref_metrics, rel=1e-5, abs=1e-6)
         for name, p in m.named_parameters():
             torch.testing.assert_close(p.grad.double(), ref_grads[name], rtol=1e-5, atol=1e-6)
 
 
+# --------------------------------------------------------------------- continuous actions
+def gaussian_model(algo: str, seed: int = 0, hidden: int = 16) -> ActorCritic:
+    """A small seeded model with diagonal-Gaussian actors over a 2-D command."""
+    return ActorCritic(
+        OBS,
+        N,
+        GaussianActions(2),
+        hidden,
+        shared_critic=algo == "a2cm",
+        generator=torch.Generator().manual_seed(seed),
+    )
+
+
+def test_gaussian_loss_uses_the_unclipped_sample_and_reaches_log_std() -> None:
+    m = gaussian_model("a2cm")
+    batch = random_batch()
+    rng = np.random.default_rng(0)
+    batch["actions"] = torch.from_numpy(3.0 * rng.standard_normal((16, 2, N, 2))).float()
+    metrics = Learner(m, Train()).update(batch)
+    assert m.log_std.grad is not None and m.log_std.grad.abs().sum() > 0
+    # entropy of N(·, 1) per dimension at the initial log_std = 0
+    assert metrics["entropy"] == pytest.approx(2 * 0.5 * np.log(2 * np.pi * np.e), rel=1e-6)
+    # the log-probability is of the action as sampled (|a| = 3 is outside the box)
+    m2 = gaussian_model("a2cm")
+    clipped = dict(batch, actions=batch["actions"].clamp(-1, 1))
+    assert Learner(m2, Train()).update(clipped)["policy_loss"] != metrics["policy_loss"]
+
+
 @pytest.mark.parametrize("algo", ["a2c", "a2cm"])
-def test_numpy_and_torch_backends_take_the_same_steps(algo: str) -> None:
-    cfg = Train(algo=algo, max_grad_norm=0.5)
-    learners = [Learner(model(algo, hidden=64), cfg, backend=b) for b in ("numpy", "torch")]
-    for seed in range(4):
-        fast, ref = (learner.update(trainer_batch(seed=seed)) for learner in learners)
-        assert fast == pytest.approx(ref, rel=1e-5, abs=1e-6)
-    a, b = (learner.model for learner in learners)
-    for p, q in zip(a.parameters(), b.parameters(), strict=True):
-        torch.testing.assert_close(p, q, rtol=0, atol=1e-5)
-    states = [learner.optimizer.state_dict()["state"] for learner in learners]
-    for s, t in zip(states[0].values(), states[1].values(), strict=True):
-        assert s["step"] == t["step"] == 4
-        torch.testing.assert_close(s["square_avg"], t["square_avg"], rtol=1e-4, atol=1e-9)
-    obs = np.random.default_rng(0).random((5, OBS), dtype=np.float32)  # act() sees the steps
-    np.testing.assert_allclose(a.logits_np(obs), a.logits_np(obs, backend="torch"), atol=1e-5)
+def test_gaussian_bandit_learns_the_rewarded_command(algo: str) -> None:
+    # one-step episodes, reward −|a_i − target_i|² summed: the means move to the targets
+    target = np.array([[0.5, -0.5], [-0.3, 0.2], [0.0, 0.8]], dtype=np.float32)
+    m = gaussian_model(algo)
+    learner = Learner(m, Train(algo=algo, lr=3e-3, optimizer="adam", normalize_advantages=True))
+    rng = np.random.default_rng(0)
+    obs = np.full((32, 1, OBS), 0.5, dtype=np.float32)
+    done = np.ones((32, 1), dtype=bool)
+    for _ in range(600):
+        acts = m.act(obs[:, 0], rng)  # (T, N, 2) float32
+        reward = -((acts - target) ** 2).sum((-1, -2))
+        learner.update(
+            {
+                "obs": obs,
+                "actions": acts[:, None],
+                "rewards": reward[:, None],
+                "terminated": done,
+                "truncated": ~done,
+                "final_obs": obs,
+                "next_obs": obs[0],
+            }
+        )
+    mean = m.act(obs[0], rng, greedy=True)[0]
+    np.testing.assert_allclose(mean, target, atol=0.15)
+    assert m.act(obs[0], rng, greedy=True).dtype == np.float32
 
 
-def test_packed_rmsprop_step_is_torch_rmsprop_bit_for_bit() -> None:
-    m = model("a2c", hidden=32)
-    learner = Learner(m, Train(algo="a2c"))
-    learner.update(random_batch(seed=0))  # torch creates the optimiser state
-    learner.update(random_batch(seed=1))  # the packed path adopts it
-    twin = copy.deepcopy(m)
-    twin_opt = torch.optim.RMSprop(twin.parameters(), lr=7e-3, alpha=0.9, eps=1e-7)
-    twin_opt.load_state_dict(copy.deepcopy(learner.optimizer.state_dict()))
-    g = torch.Generator().manual_seed(0)
-    fast = learner._fast
-    assert fast is not None
-    fast.grad_flat.copy_(torch.randn(fast.grad_flat.shape, generator=g) * 1e-3)
-    fast.attach_grads()
-    for p, q in zip(m.parameters(), twin.parameters(), strict=True):
-        q.grad = p.grad.clone()
-    assert fast.rmsprop_step(learner.optimizer)
-    twin_opt.step()
-    for p, q in zip(m.parameters(), twin.parameters(), strict=True):
-        assert torch.equal(p, q)
-    mine, theirs = learner.optimizer.state_dict()["state"], twin_opt.state_dict()["state"]
-    for k in mine:
-        assert torch.equal(mine[k]["square_avg"], theirs[k]["square_avg"])
-        assert torch.equal(mine[k]["step"], theirs[k]["step"])
-
-
-def test_checkpoints_move_between_backends_and_through_torch_save() -> None:
-    cfg = Train(algo="a2cm")
-    a = Learner(model("a2cm"), cfg, backend="torch")
-    a.update(random_batch(seed=0))
-    buffer = io.BytesIO()
-    torch.save(a.state_dict(), buffer)
-    b = Learner(model("a2cm", seed=5), cfg)  # numpy backend adopts torch's state
-    b.load_state_dict(torch.load(io.BytesIO(buffer.getvalue())))
-    for s in range(1, 4):
-        b.update(random_batch(seed=s))
-    buffer = io.BytesIO()
-    torch.save(b.state_dict(), buffer)  # state tensors are views of packed buffers
-    c = Learner(model("a2cm", seed=6), cfg)
-    c.load_state_dict(torch.load(io.BytesIO(buffer.getvalue())))
-    d = Learner(model("a2cm", seed=7), cfg, backend="torch")
-    d.load_state_dict(b.state_dict())
-    out_b, out_c, out_d = (x.update(random_batch(seed=9)) for x in (b, c, d))
-    assert out_b == out_c  # resumed bit-exactly
-    assert out_d == pytest.approx(out_b, rel=1e-5)
-    for p, q in zip(b.model.parameters(), c.model.parameters(), strict=True):
-        assert torch.equal(p, q)
-    assert b.optimizer.state_dict()["state"][0]["step"] == 5
-
-
-def test_falls_back_to_torch_when_the_model_is_not_packed() -> None:
+# --------------------------------------------------------------------- issue 12's pieces
+def test_advantage_normalisation_standardises_the_actor_advantage() -> None:
+    batch = trainer_batch(seed=4)
+    plain, normed = Train(entropy_coef=0.0), Train(entropy_coef=0.0, normalize_advantages=True)
+    ref_metrics, _ = reference_loss(model("a2cm"), batch, plain)
     m = model("a2cm")
-    m.load_state_dict(model("a2cm", seed=1).state_dict(), assign=True)  # new tensors
-    assert m.packed() is None
-    learner = Learner(m, Train())
-    assert learner.active_backend == "torch"
-    metrics = learner.update(random_batch())
+    metrics = Learner(m, normed).update(batch)
+    # the critic's part is unchanged, the policy loss is of standardised advantages
+    assert metrics["value_loss"] == pytest.approx(ref_metrics["value_loss"], rel=1e-5)
+    assert metrics["policy_loss"] != pytest.approx(ref_metrics["policy_loss"], rel=1e-3)
+    learner = Learner(model("a2cm"), normed)
+    adv = torch.tensor([[[[1.0]], [[3.0]]], [[[5.0]], [[7.0]]]], dtype=torch.float64)
+    out = learner._actor_advantage(adv)  # (T=2, B=2, C=1)
+    expected = (np.array([1.0, 3.0, 5.0, 7.0]) - 4.0) / np.std([1, 3, 5, 7], ddof=1)
+    np.testing.assert_allclose(out.flatten().numpy(), expected, rtol=1e-6)
+
+
+def test_split_rewards_value_each_component_and_scale_it_apart() -> None:
+    cfg = Train(value_norm=True, split_rewards=True)
+    m = ActorCritic(OBS, N, A, 16, shared_critic=True, n_values=2)
+    learner = Learner(m, cfg)
+    batch = trainer_batch(seed=1)
+    parts = np.zeros((*batch["rewards"].shape, 2))
+    parts[..., 0] = -1.0
+    parts[3, 2, 1] = -1e8  # one catastrophic collision
+    batch["reward_parts"] = parts
+    batch["rewards"] = parts.sum(-1)
+    metrics = learner.update(batch)
     assert np.isfinite(metrics["loss"])
-    with pytest.raises(ValueError, match="numpy backend"):
-        Learner(m, Train(), backend="numpy").update(random_batch())
-
-
-def test_blas_threads_are_capped_only_during_an_update() -> None:
-    blas = [p for p in threadpool_info() if p["user_api"] == "blas"]
-    if not blas:
-        pytest.skip("numpy's BLAS is not visible to threadpoolctl here")
-    before = [p["num_threads"] for p in blas]
-    Learner(model("a2cm"), Train()).update(random_batch())
-    assert [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"] == before
+    _, std = learner.value_norm.stats()
+    assert std[1] > 1e5 * std[0]  # each component has its own scale
+    adv = torch.ones(2, 2, 1, 2, dtype=torch.float64)
+    expected = (1 / std[0] + 1 / std[1]).item()
+    assert learner._actor_advantage(adv)[0, 0, 0].item() == pytest.approx(expected, rel=1e-6)
+    with pytest.raises(ValueError, match="components"):
+        learner.update(dict(batch, reward_parts=parts[..., :1]))

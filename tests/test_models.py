@@ -8,6 +8,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from a2cm_phys.algos.distributions import CategoricalActions, GaussianActions
 from a2cm_phys.algos.models import ActorCritic, StackedLinear, make_model, sample_categorical
 from a2cm_phys.config import Scenario, Train
 
@@ -102,17 +103,6 @@ def test_act_is_deterministic_for_a_seeded_generator() -> None:
     assert m.act(obs[0], np.random.default_rng(0)).shape == (N,)
 
 
-def test_numpy_and_torch_backends_agree() -> None:
-    m = model(False)
-    obs = np.random.default_rng(1).random((4, OBS), dtype=np.float32)
-    np.testing.assert_allclose(
-        m.logits_np(obs), m.logits_np(obs, backend="torch"), rtol=1e-5, atol=1e-5
-    )
-    a = m.act(obs, np.random.default_rng(2))
-    b = m.act(obs, np.random.default_rng(2), backend="torch")
-    assert np.array_equal(a, b)
-
-
 def set_policy(m: ActorCritic, probs: np.ndarray) -> None:
     """Make every actor ignore the input and output ``log(probs[i])``."""
     with torch.no_grad():
@@ -160,55 +150,52 @@ def test_sample_categorical_extreme_logits() -> None:
     assert (out == 0).all()
 
 
-@pytest.mark.parametrize("shared", [True, False])
-def test_parameters_are_views_of_one_packed_buffer(shared: bool) -> None:
-    m = model(shared)
-    packed = m.packed()
-    assert packed is not None
-    assert packed.flat.numel() == n_params(m)
-    k = N + m.n_critics
-    assert packed.w1.shape == (k * H, OBS) and packed.b1.shape == (k * H,)
-    assert torch.equal(packed.w1[: N * H].view(N, H, OBS), m.actor_hidden.weight)
-    assert torch.equal(packed.w1[N * H :].view(-1, H, OBS), m.critic_hidden.weight)
-    assert torch.equal(
-        packed.b1, torch.cat([m.actor_hidden.bias.flatten(), m.critic_hidden.bias.flatten()])
-    )
-    assert torch.equal(packed.w2_actor, m.actor_out.weight)
-    assert torch.equal(packed.w2_critic, m.critic_out.weight)
-    assert torch.equal(
-        packed.b2, torch.cat([m.actor_out.bias.flatten(), m.critic_out.bias.flatten()])
-    )
-    version = m.actor_out.weight._version
+def test_numpy_rollout_outputs_match_the_torch_forward() -> None:
+    m = model(False)
+    obs = np.random.default_rng(1).random((4, OBS), dtype=np.float32)
     with torch.no_grad():
-        packed.flat.add_(1.0)  # one buffer: every parameter sees it (and its version moves)
-    assert m.actor_out.weight._version > version
-    assert torch.equal(packed.w2_critic, m.critic_out.weight)
-    assert m.critic_out.weight.is_leaf and m.critic_out.weight.requires_grad
+        expected = m.actor_outputs(torch.from_numpy(obs)).numpy()
+    np.testing.assert_allclose(m.outputs_np(obs), expected, rtol=1e-5, atol=1e-5)
 
 
-def test_packing_keeps_the_initialisation_and_parameter_names() -> None:
-    g = torch.Generator().manual_seed(4)
-    layers = [StackedLinear(N, OBS, H, g), StackedLinear(N, H, A, g)]
-    layers += [StackedLinear(1, OBS, H, g), StackedLinear(1, H, 1, g)]
-    m = model(True, seed=4)
-    expected = [t for layer in layers for t in (layer.weight, layer.bias)]
-    assert [name for name, _ in m.named_parameters()] == [
-        f"{layer}.{kind}"
-        for layer in ("actor_hidden", "actor_out", "critic_hidden", "critic_out")
-        for kind in ("weight", "bias")
-    ]
-    for p, q in zip(m.parameters(), expected, strict=True):
-        assert torch.equal(p, q)
+def gaussian(shared: bool, log_std: float = 0.0) -> ActorCritic:
+    """A Gaussian-actor model over a 2-D command."""
+    return ActorCritic(
+        OBS,
+        N,
+        GaussianActions(2),
+        H,
+        shared_critic=shared,
+        log_std_init=log_std,
+        generator=torch.Generator().manual_seed(0),
+    )
 
 
-def test_packing_is_reported_lost_after_conversion() -> None:
-    m = model(True)
-    assert m.to("cpu").packed() is not None  # a no-op move keeps it
-    m.load_state_dict(model(True, seed=1).state_dict())  # copied in place: kept
-    assert m.packed() is not None
-    assert m.double().packed() is None
-    logits, values = m(torch.randn(2, OBS, dtype=torch.float64))  # still a working model
-    assert logits.shape == (2, N, A) and values.shape == (2, 1)
-    obs = np.random.default_rng(0).random((3, OBS))
-    expected = m.policy_logits(torch.from_numpy(obs)).detach().numpy()
-    np.testing.assert_allclose(m.logits_np(obs), expected, atol=1e-5)  # snapshot refreshed
+@pytest.mark.parametrize("shared", [True, False])
+def test_gaussian_parameter_count_and_shapes(shared: bool) -> None:
+    m = gaussian(shared)
+    actor = (OBS * H + H) + (H * 2 + 2) + 2  # the mean head and a log-std per dimension
+    critic = (OBS * H + H) + (H + 1)
+    assert n_params(m) == N * actor + m.n_critics * critic
+    dist = m.distribution(torch.randn(5, OBS))
+    assert dist.batch_shape == (5, N) and dist.event_shape == (2,)
+    actions = m.act(np.zeros((5, OBS), dtype=np.float32), np.random.default_rng(0))
+    assert actions.shape == (5, N, 2) and actions.dtype == np.float32
+
+
+def test_gaussian_samples_have_the_mean_and_std_of_the_policy() -> None:
+    m = gaussian(True, log_std=-1.0)
+    obs = np.zeros((20_000, OBS), dtype=np.float32)
+    acts = m.act(obs, np.random.default_rng(0))
+    mean = m.act(obs[:1], np.random.default_rng(0), greedy=True)[0]  # greedy = the mean
+    np.testing.assert_allclose(acts.mean(0), mean, atol=4 * np.exp(-1.0) / np.sqrt(len(obs)))
+    np.testing.assert_allclose(acts.std(0), np.exp(-1.0), rtol=0.03)
+    with pytest.raises(TypeError, match="discrete"):
+        m.action_probs_np(obs[:1])
+
+
+def test_make_model_follows_the_scenario_control() -> None:
+    discrete = make_model(Train(), Scenario())
+    assert isinstance(discrete.dist, CategoricalActions) and discrete.log_std is None
+    split = make_model(Train(split_rewards=True, algo="a2c"), Scenario())
+    assert split.n_values == 2 and split.value(torch.zeros(Scenario().obs_dim)).shape == (N, 2)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from a2cm_phys.algos.returns import advantages, discounted_returns, discounted_returns_np
+from a2cm_phys.algos.returns import advantages, discounted_returns, discounted_returns_np, gae
 
 torch.set_num_threads(1)
 
@@ -185,3 +185,36 @@ def test_empty_batch() -> None:
         0.9,
     )
     assert g.shape == (0, 3)
+
+
+def test_gae_by_hand_with_a_terminal_and_a_truncation_in_the_middle() -> None:
+    # one env, T = 4: step 1 terminates, step 2 is truncated (its final obs is worth 10)
+    r = np.array([[1.0], [2.0], [3.0], [4.0]])
+    v = np.array([[0.5], [0.25], [1.0], [2.0]])
+    after = np.array([[0.25], [99.0], [10.0], [8.0]])  # V of the state after each step
+    term = np.array([[False], [True], [False], [False]])
+    trunc = np.array([[False], [False], [True], [False]])
+    g, lam = 0.9, 0.5
+    got = gae(r, v, after, term, trunc, g, lam)
+    d3 = 4 + g * 8 - 2  # bootstrapped with the value after the batch
+    d2 = 3 + g * 10 - 1  # truncated: its own final obs, nothing from step 3
+    d1 = 2 - 0.25  # terminal: no future at all (the 99 is never read)
+    d0 = 1 + g * 0.25 - 0.5
+    expected = [d0 + g * lam * d1, d1, d2, d3]
+    np.testing.assert_allclose(got[:, 0], expected)
+
+
+def test_gae_with_lambda_one_gives_eq_13_returns() -> None:
+    rng = np.random.default_rng(0)
+    t, b = 12, 3
+    r = rng.normal(size=(t, b))
+    v = rng.normal(size=(t, b))
+    boot = rng.normal(size=b)
+    final = rng.normal(size=(t, b))
+    term = rng.random((t, b)) < 0.2
+    trunc = (rng.random((t, b)) < 0.2) & ~term
+    after = np.concatenate([v[1:], boot[None]])
+    after = np.where(trunc, final, after)
+    adv = gae(r, v, after, term, trunc, 0.97, 1.0)
+    returns = discounted_returns_np(r, term, trunc, boot, final, 0.97)
+    np.testing.assert_allclose(adv + v, returns, rtol=1e-12, atol=1e-12)

@@ -1,30 +1,39 @@
-"""Learning algorithms: batched actor–critic models, returns (eqs. 12–13) and the learner.
+"""Learning algorithms: action distributions, batched actor–critic models, returns and the
+learner.
 
+- :mod:`.distributions`: categorical and diagonal-Gaussian actions behind one interface.
 - :class:`ActorCritic` / :func:`make_model`: N actors with one critic (A2CM) or N (A2C).
-- :func:`discounted_returns` / :func:`advantages`: time-major targets.
-- :class:`Learner`: RMSprop step on one batch; :class:`NonFiniteLoss` when the loss blows up.
+- :func:`gae` / :func:`discounted_returns`: time-major advantages and returns (eqs. 12–13).
+- :class:`ValueNorm`: PopArt-style running normalisation of value targets per component.
+- :class:`Learner`: one autograd loss and optimiser step; :class:`NonFiniteLoss`.
 """
 
-from a2cm_phys.algos.learner import BATCH_KEYS, Learner, NonFiniteLoss
-from a2cm_phys.algos.models import (
-    ActorCritic,
-    PackedParams,
-    StackedLinear,
-    make_model,
+from a2cm_phys.algos.distributions import (
+    ActionDistribution,
+    CategoricalActions,
+    GaussianActions,
     sample_categorical,
 )
-from a2cm_phys.algos.returns import advantages, discounted_returns, discounted_returns_np
+from a2cm_phys.algos.learner import BATCH_KEYS, Learner, NonFiniteLoss
+from a2cm_phys.algos.models import ActorCritic, StackedLinear, action_distribution, make_model
+from a2cm_phys.algos.normalize import ValueNorm
+from a2cm_phys.algos.returns import advantages, discounted_returns, discounted_returns_np, gae
 
 __all__ = [
     "BATCH_KEYS",
+    "ActionDistribution",
     "ActorCritic",
+    "CategoricalActions",
+    "GaussianActions",
     "Learner",
     "NonFiniteLoss",
-    "PackedParams",
     "StackedLinear",
+    "ValueNorm",
+    "action_distribution",
     "advantages",
     "discounted_returns",
     "discounted_returns_np",
+    "gae",
     "make_model",
     "sample_categorical",
 ]

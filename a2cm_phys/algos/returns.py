@@ -108,3 +108,48 @@ def discounted_returns_np(
 def advantages(returns: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
     """Advantages by eq. 12: ``A_t = G_t − V(s_t)``, broadcasting the critic dim."""
     return returns - values
+
+
+def gae(
+    rewards: np.ndarray,
+    values: np.ndarray,
+    next_values: np.ndarray,
+    terminated: np.ndarray,
+    truncated: np.ndarray,
+    gamma: float,
+    lam: float,
+) -> np.ndarray:
+    """Generalised advantage estimates GAE(γ, λ) over a time-major batch, in float64.
+
+    ``δ_t = r_t + γ·(1 − term_t)·V'_t − V_t`` where ``V'_t`` is the value of the state after
+    step t: of the next observation, or of the episode's final observation where it was
+    truncated (bootstrapped, never treated as terminal), or of the observation after the
+    batch at ``t = T − 1``. Then ``A_t = δ_t + γλ·(1 − done_t)·A_{t+1}`` with ``done = term |
+    trunc``: nothing flows back across an episode end. With ``λ = 1`` the returns ``A + V``
+    are exactly eq. 13's (:func:`discounted_returns`); ``λ < 1`` trades bias for variance.
+
+    Args:
+        rewards: ``(T, B, ...)`` rewards (any trailing critic/component dims).
+        values: ``(T, B, ...)`` values of the observations the steps started from.
+        next_values: ``(T, B, ...)`` ``V'_t`` as above (read only where not terminated).
+        terminated, truncated: ``(T, B)`` bool.
+        gamma, lam: discount and GAE parameter, both in ``[0, 1]``.
+
+    Returns:
+        Advantages of the shape of ``rewards`` broadcast with ``values``.
+    """
+    extra = (1,) * (np.ndim(values) - 2)
+    term = np.asarray(terminated, dtype=bool).reshape(*np.shape(terminated), *extra)
+    done = term | np.asarray(truncated, dtype=bool).reshape(term.shape)
+    r = np.asarray(rewards, dtype=np.float64)
+    v = np.asarray(values, dtype=np.float64)
+    nv = np.where(term, 0.0, np.asarray(next_values, dtype=np.float64))
+    delta = r + gamma * nv - v
+    carry = np.where(done, 0.0, gamma * lam)
+    carry = np.broadcast_to(carry, delta.shape)
+    out = np.empty_like(delta)
+    a = np.zeros(delta.shape[1:])
+    for t in range(len(delta) - 1, -1, -1):
+        a = delta[t] + carry[t] * a
+        out[t] = a
+    return out

@@ -1,0 +1,162 @@
+"""What each piece of the learner buys on the collision scenarios (issue 12's ablation).
+
+    python benchmarks/bench_collision.py --variants paper16,ours --seeds 0-4 \
+        --scenarios grid_collision,grid_collision_continue [--algos a2cm,a2c] [--jobs 2]
+
+Each variant is a set of training options (``VARIANTS``; every run has 640,000 steps unless
+``--steps`` says otherwise). A run is trained, then its greedy and sampled policies play
+``--episodes`` evaluation episodes; a row gives medians over seeds of the mean capture steps
+(greedy, sampled), the collisions per episode, the return relative to the optimum's (raw
+reward) and the wall time, beside the exact optimum (``a2cm_phys.oracle``). Runs go to a
+process pool (``--jobs``), so wall times are only comparable within one invocation.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+VARIANTS: dict[str, dict[str, Any]] = {
+    # the paper's method with 16 games (the paper's own run has 1 game)
+    "paper16": {"num_envs": 16},
+    "+advnorm": {"num_envs": 16, "normalize_advantages": True},
+    "+popart": {"num_envs": 16, "value_norm": True},
+    "+popart+advnorm": {"num_envs": 16, "value_norm": True, "normalize_advantages": True},
+    "+split": {"num_envs": 16, "value_norm": True, "split_rewards": True},
+    "+split+advnorm": {
+        "num_envs": 16,
+        "value_norm": True,
+        "split_rewards": True,
+        "normalize_advantages": True,
+    },
+    "+split+gae": {"num_envs": 16, "value_norm": True, "split_rewards": True, "gae_lambda": 0.95},
+    "+split+adam": {
+        "num_envs": 16,
+        "value_norm": True,
+        "split_rewards": True,
+        "optimizer": "adam",
+        "lr": 1e-3,
+    },
+    "+advnorm+gae": {"num_envs": 16, "normalize_advantages": True, "gae_lambda": 0.95},
+    "+advnorm+adam": {
+        "num_envs": 16,
+        "normalize_advantages": True,
+        "optimizer": "adam",
+        "lr": 1e-3,
+    },
+    "+advnorm+b256": {"num_envs": 32, "batch_size": 256, "normalize_advantages": True},
+    "+advnorm+ent": {"num_envs": 16, "normalize_advantages": True, "entropy_coef": 1e-2},
+    "+advnorm+clip": {"num_envs": 16, "normalize_advantages": True, "max_grad_norm": 0.5},
+    "ours": {},  # the defaults
+}
+
+
+def run(scenario: str, algo: str, variant: str, seed: int, steps: int, episodes: int) -> dict:
+    """Train one run and evaluate it; returns a row of figures."""
+    import torch
+
+    from a2cm_phys.config import load_scenario, load_train
+    from a2cm_phys.evaluate import model_policy, play
+    from a2cm_phys.train import Trainer
+
+    torch.set_num_threads(1)
+    options = dict(VARIANTS[variant])
+    batch = options.get("batch_size", load_train(options).batch_size)
+    cfg = load_train({**options, "algo": algo, "seed": seed, "updates": steps // batch})
+    sc = load_scenario(scenario)
+    with tempfile.TemporaryDirectory() as tmp:
+        trainer = Trainer(sc, cfg, tmp, record=False)
+        start = time.perf_counter()
+        status = trainer.run()
+        seconds = time.perf_counter() - start
+    greedy = play(sc, model_policy(trainer.model, greedy=True), episodes, seed=1)
+    sampled = play(sc, model_policy(trainer.model), episodes, seed=1)
+    return {
+        "scenario": scenario,
+        "algo": algo,
+        "variant": variant,
+        "seed": seed,
+        "status": status,
+        "greedy": float(greedy.lengths.mean()),
+        "greedy_coll": float(greedy.collisions.mean()),
+        "greedy_return": float(greedy.returns.mean()),
+        "sampled": float(sampled.lengths.mean()),
+        "sampled_coll": float(sampled.collisions.mean()),
+        "seconds": seconds,
+    }
+
+
+def optimum(scenario: str) -> tuple[float, float]:
+    """The exact optimum's expected capture steps and return from the default start."""
+    from a2cm_phys.config import load_scenario
+    from a2cm_phys.oracle import load_or_solve
+
+    sol = load_or_solve(load_scenario(scenario))
+    start = sol.start_positions()
+    return float(sol.expected_capture_steps(start)), float(sol.optimal_return(start))
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``0-4`` or ``1,3``."""
+    out: list[int] = []
+    for part in text.split(","):
+        lo, _, hi = part.partition("-")
+        out += range(int(lo), int(hi) + 1) if hi else [int(lo)]
+    return out
+
+
+def main() -> int:
+    """Run the grid of variants × scenarios × algos × seeds and print the table."""
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--variants", default=",".join(VARIANTS))
+    p.add_argument("--scenarios", default="grid_collision")
+    p.add_argument("--algos", default="a2cm")
+    p.add_argument("--seeds", default="0-1")
+    p.add_argument("--steps", type=int, default=640_000)
+    p.add_argument("--episodes", type=int, default=5000)
+    p.add_argument("--jobs", type=int, default=2)
+    args = p.parse_args()
+    variants = args.variants.split(",")
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        p.error(f"unknown variants {unknown} (known: {', '.join(VARIANTS)})")
+    jobs = [
+        (s, a, v, seed, args.steps, args.episodes)
+        for s in args.scenarios.split(",")
+        for a in args.algos.split(",")
+        for v in variants
+        for seed in parse_seeds(args.seeds)
+    ]
+    with ProcessPoolExecutor(args.jobs) as pool:
+        rows = list(pool.map(run, *zip(*jobs, strict=True)))
+    print("command: python benchmarks/bench_collision.py " + " ".join(sys.argv[1:]))
+    print(
+        "| scenario | algo | variant | seeds | greedy steps (median; all) | greedy collisions/ep"
+        " | return / optimum | sampled steps | sampled collisions/ep | wall s |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for s in args.scenarios.split(","):
+        best, best_return = optimum(s)
+        for a in args.algos.split(","):
+            for v in variants:
+                rs = [r for r in rows if (r["scenario"], r["algo"], r["variant"]) == (s, a, v)]
+                keys = ("greedy", "greedy_coll", "sampled", "sampled_coll", "seconds")
+                med = {k: statistics.median(r[k] for r in rs) for k in keys}
+                each = ", ".join(f"{r['greedy']:.2f}" for r in rs)
+                ratio = statistics.median(r["greedy_return"] / best_return for r in rs)
+                print(
+                    f"| {s} | {a} | {v} | {len(rs)} | {med['greedy']:.3f} ({each}) |"
+                    f" {med['greedy_coll']:.4f} | {ratio:.3f} | {med['sampled']:.3f} |"
+                    f" {med['sampled_coll']:.4f} | {med['seconds']:.1f} |"
+                )
+        print(f"\noptimum of {s}: {best:.3f} steps, return {best_return:,.0f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
