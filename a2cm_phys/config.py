@@ -28,6 +28,10 @@ Mode = Literal["grid", "physics"]
 EvaderPolicy = Literal["random", "flee", "static"]
 CollisionMode = Literal["off", "terminate", "penalize"]
 Algo = Literal["a2c", "a2cm"]
+Control = Literal["discrete", "continuous"]
+
+DEFAULT_DT = {"discrete": 1.0, "continuous": 0.1}
+"""The control period ``physics.dt`` (s) of each control type when a scenario omits it."""
 
 
 class ConfigError(ValueError):
@@ -59,7 +63,8 @@ class Physics:
     evader_radius: float = 0.3
     mass: float = 1.0
     max_speed: float = 1.0
-    substeps: int = 10
+    dt: float | None = None  # control period (s); None: DEFAULT_DT of the scenario's control
+    substeps: int = 10  # fixed solver steps per control period
     wall_thickness: float = 1.0
     max_force: float = 50.0
 
@@ -79,8 +84,25 @@ class Physics:
             raise _KeyError("physics.box_side", f"must be < 1 (one cell), got {self.box_side!r}")
         if self.evader_radius >= 0.5:
             raise _KeyError("physics.evader_radius", f"must be < 0.5, got {self.evader_radius!r}")
+        if self.dt is not None and not self.dt > 0:
+            raise _KeyError("physics.dt", f"must be > 0, got {self.dt!r}")
         if self.substeps < 1:
             raise _KeyError("physics.substeps", f"must be >= 1, got {self.substeps!r}")
+
+    def check_substeps(self) -> None:
+        """Refuse substeps so long that two bodies closing at ``2 × max_speed`` could pass
+        through the smallest body in one substep (``2 · max_speed · dt / substeps``)."""
+        smallest = min(self.box_side, 2 * self.evader_radius)
+        dt = 1.0 if self.dt is None else self.dt
+        reach = 2 * self.max_speed * dt / self.substeps
+        if reach >= smallest:
+            raise _KeyError(
+                "physics.substeps",
+                f"physics.substeps = {self.substeps} is too few: two agents closing at "
+                f"2 × max_speed would move {reach:g} m per substep (dt = {dt:g} s), enough "
+                f"to pass through a {smallest:g} m body; use more than "
+                f"{int(2 * self.max_speed * dt / smallest)} substeps",
+            )
 
 
 @dataclass(frozen=True)
@@ -92,11 +114,17 @@ class Scenario:
     size: int = 5
     pursuers: int = 3
     actions: int = 4
+    control: Control = "discrete"  # physics mode: "continuous" steers with velocity commands
     evader: EvaderPolicy = "random"
     max_steps: int = 1000
     rewards: Rewards = field(default_factory=Rewards)
     collisions: Collisions = field(default_factory=Collisions)
     physics: Physics = field(default_factory=Physics)
+
+    def __post_init__(self) -> None:
+        if self.physics.dt is None:  # the control type decides the default period
+            physics = dataclasses.replace(self.physics, dt=DEFAULT_DT.get(self.control, 1.0))
+            object.__setattr__(self, "physics", physics)
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of the first impossible value."""
@@ -116,6 +144,17 @@ class Scenario:
         if self.max_steps < 1:
             raise _KeyError("max_steps", f"must be >= 1, got {self.max_steps}")
         self.physics.validate()
+        if self.mode == "physics":
+            self.physics.check_substeps()
+        elif self.control != "discrete":
+            raise _KeyError(
+                "control", f"{self.control!r} needs mode = 'physics' (grid moves are discrete)"
+            )
+
+    @property
+    def continuous(self) -> bool:
+        """Whether pursuers steer with velocity commands (SPEC §3b) rather than discrete moves."""
+        return self.control == "continuous"
 
     @property
     def agents(self) -> list[str]:
@@ -291,7 +330,10 @@ def _coerce(value: Any, hint: Any, key: str) -> Any:
             raise _KeyError(key, f"must be one of {', '.join(map(repr, choices))}, got {value!r}")
         return value
     if origin in (typing.Union, types.UnionType):
-        raise TypeError(f"unsupported annotation for {key}: {hint}")
+        args = [arg for arg in typing.get_args(hint) if arg is not type(None)]
+        if len(args) != 1 or len(typing.get_args(hint)) != 2:
+            raise TypeError(f"unsupported annotation for {key}: {hint}")
+        return None if value is None else _coerce(value, args[0], key)  # X | None
     if hint is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise _KeyError(key, f"must be a number, got {value!r}")

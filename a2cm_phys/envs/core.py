@@ -9,6 +9,12 @@ Each game carries its own *episode seed*: every random number of an episode (the
 moves) is a pure function of that seed and the step counter (see :mod:`.evader`), so an
 episode can be re-simulated from its seed and the pursuers' actions alone, whatever batch
 it was played in.
+
+The evader is a policy injected into the core (:class:`EvaderPolicy`): each step the core
+asks it for every game's command and plays it by the mode's rules, written once. Pursuer
+actions are ``(B, N)`` integer moves, or with continuous control (SPEC §3b) ``(B, N, 2)``
+float velocity commands as fractions of ``max_speed``, which the core clips to the unit
+disc.
 """
 
 from __future__ import annotations
@@ -42,7 +48,8 @@ class StepOutcome:
     captured: np.ndarray  # bool
     collisions: np.ndarray  # int64: pursuer pairs that collided in this step
     wall_contacts: np.ndarray  # int64: pursuer moves or contacts against a wall
-    evader_action: np.ndarray  # int64: the evader's move, for logs and replays
+    evader_action: np.ndarray  # the evader's command, for logs and replays: int64 (B,)
+    # moves, or with continuous control float64 (B, 2) velocities as fractions of max_speed
     events: list[list[tuple[str, str, str, int]]] | None = None
 
 
@@ -102,6 +109,30 @@ def settle(
     )
 
 
+class EvaderPolicy(Protocol):
+    """The evader of a batch of games, as a core plays it (scripted: :mod:`.evader`,
+    :mod:`.evader_continuous`). A core owns the seed and step arrays it passes in; it calls
+    :meth:`restart` for the games it resets and :meth:`forget` when it changes those arrays
+    in any other way (loading a state)."""
+
+    def restart(self, envs: np.ndarray, seeds: np.ndarray) -> None:
+        """Games ``envs`` start new episodes (``t = 0``) with episode ``seeds``."""
+
+    def forget(self) -> None:
+        """Drop anything computed ahead from the seed and step arrays."""
+
+    def moves(
+        self,
+        seed: np.ndarray,
+        t: np.ndarray,
+        evader_xy: np.ndarray | None,
+        pursuer_xy: np.ndarray | None,
+    ) -> np.ndarray:
+        """The evader's command in every game at steps ``t`` (the games' episode ``seed``,
+        the evader's ``(B, 2)`` and the pursuers' ``(B, N, 2)`` positions): ``(B,)`` moves,
+        or ``(B, 2)`` velocity fractions with continuous control."""
+
+
 class Core(Protocol):
     """A batch of ``num_envs`` games of one scenario; see the module docstring."""
 
@@ -119,7 +150,8 @@ class Core(Protocol):
         """Start new episodes in games ``envs`` with episode ``seeds``."""
 
     def step(self, actions: np.ndarray) -> StepOutcome:
-        """Advance every game by one step with pursuer ``actions`` of shape ``(B, N)``."""
+        """Advance every game by one step with pursuer ``actions`` ``(B, N)``, or ``(B, N, 2)``
+        with continuous control."""
 
     def observe(self) -> np.ndarray:
         """Global observations, float32 of shape ``(B, obs_dim)`` (SPEC §5)."""
@@ -180,6 +212,49 @@ def parse_positions(
             )
         out[names.index(agent)] = xy
     return out
+
+
+def action_shape(scenario: Scenario) -> tuple[int, ...]:
+    """One game's joint action: ``(N,)`` moves, or ``(N, 2)`` commands with continuous control."""
+    n = scenario.pursuers
+    return (n, 2) if scenario.continuous else (n,)
+
+
+def clip_to_disc(commands: np.ndarray) -> np.ndarray:
+    """Velocity commands ``(..., 2)`` as float64, vectors longer than 1 scaled back onto the
+    unit circle (SPEC §3b: out-of-range commands are clipped, not refused)."""
+    commands = np.asarray(commands, dtype=np.float64)
+    squared = (commands * commands).sum(-1, keepdims=True)
+    if not (squared > 1.0).any():  # the common case: nothing to clip (same result)
+        return commands
+    return commands / np.sqrt(np.maximum(squared, 1.0))
+
+
+def check_commands(actions: np.ndarray, names: Sequence[str]) -> None:
+    """Raise ``ValueError`` naming the agent of the first continuous command ``(B, N, 2)``
+    that is not a pair of finite numbers (NaN or inf); out-of-range values are fine."""
+    if actions.ndim != 3 or actions.shape[1:] != (len(names), 2):
+        raise ValueError(
+            f"expected continuous actions of shape (B, {len(names)}, 2), got {actions.shape}"
+        )
+    if actions.dtype.kind not in "iuf":  # integers and floats
+        raise ValueError(f"expected real-valued continuous actions, got dtype {actions.dtype}")
+    bad = ~np.isfinite(actions).all(-1)
+    if bad.any():
+        env, agent = (int(i) for i in np.argwhere(bad)[0])
+        where = f" in env {env}" if actions.shape[0] > 1 else ""
+        raise ValueError(
+            f"invalid action {actions[env, agent].tolist()} for {names[agent]}{where}:"
+            " expected a finite (vx, vy) command"
+        )
+
+
+def check_joint_actions(scenario: Scenario, actions: np.ndarray) -> None:
+    """The checks of :func:`check_commands` or :func:`check_actions`, by control type."""
+    if scenario.continuous:
+        check_commands(actions, scenario.agents)
+    else:
+        check_actions(actions, scenario.actions, scenario.agents)
 
 
 def check_actions(actions: np.ndarray, n_actions: int, names: Sequence[str]) -> None:

@@ -1,9 +1,9 @@
-"""Choose the simulation core for a scenario's mode."""
+"""Choose the simulation core for a scenario's mode, and the scripted evader it plays."""
 
 from __future__ import annotations
 
 from ..config import Scenario
-from .core import Core
+from .core import Core, EvaderPolicy
 
 
 def make_core(scenario: Scenario, num_envs: int, workers: int = 1) -> Core:
@@ -20,3 +20,16 @@ def make_core(scenario: Scenario, num_envs: int, workers: int = 1) -> Core:
     from .physics import PhysicsCore
 
     return PhysicsCore(scenario, num_envs)
+
+
+def make_evader(scenario: Scenario, num_envs: int, low: float, high: float) -> EvaderPolicy:
+    """The scenario's scripted evader for ``num_envs`` games whose evader centre stays in
+    ``[low, high]²``: discrete moves (:class:`~.evader.Evader`) or, with continuous control,
+    velocity commands (:class:`~.evader_continuous.ContinuousEvader`)."""
+    if scenario.continuous:
+        from .evader_continuous import ContinuousEvader
+
+        return ContinuousEvader(scenario, num_envs, low, high)
+    from .evader import Evader
+
+    return Evader(scenario, num_envs, low, high)

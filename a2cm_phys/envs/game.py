@@ -11,7 +11,7 @@ import numpy as np
 
 from ..config import Scenario
 from ..render import render_rgb, render_text
-from .core import Core, StepOutcome, check_actions
+from .core import Core, StepOutcome, action_shape, check_actions, check_commands
 from .factory import make_core
 
 
@@ -49,8 +49,20 @@ class Game:
         return episode_seed
 
     def step(self, joint_action: np.ndarray, checked: bool = False) -> StepOutcome:
-        """Advance the game with the pursuers' actions ``(N,)``; raises on invalid actions
-        unless the caller has ``checked`` them already (and passes them as ``(1, N)`` int64)."""
+        """Advance the game with the pursuers' actions ``(N,)``, or with continuous control
+        their commands ``(N, 2)``; raises on invalid actions unless the caller has ``checked``
+        them already (and passes them as ``(1, N)`` int64, or ``(1, N, 2)`` floats)."""
+        if not checked and self.scenario.continuous:
+            actions = np.asarray(joint_action)
+            shape = action_shape(self.scenario)
+            if actions.shape != shape:
+                raise ValueError(
+                    f"expected continuous actions of shape {shape} (one (vx, vy) per pursuer),"
+                    f" got {joint_action!r}"
+                )
+            check_commands(actions[None], self.names)
+            self.last = self.core.step(actions[None])
+            return self.last
         actions = joint_action if checked else np.asarray(joint_action).reshape(1, -1)
         if not checked:
             if actions.shape[1] != len(self.names) or not np.issubdtype(actions.dtype, np.integer):
@@ -76,7 +88,11 @@ class Game:
             captured=bool(last.captured[0]),
             collisions=int(last.collisions[0]),
             wall_contacts=int(last.wall_contacts[0]),
-            evader_action=int(last.evader_action[0]),
+            evader_action=(
+                tuple(last.evader_action[0].tolist())
+                if self.scenario.continuous
+                else int(last.evader_action[0])
+            ),
         )
         if last.events is not None:
             info["events"] = list(last.events[0])

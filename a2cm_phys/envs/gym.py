@@ -1,6 +1,7 @@
 """Gymnasium id ``a2cm_phys/Pursuit-v0``: the joint view of the game (SPEC §8).
 
-One ``MultiDiscrete`` action holds every pursuer's action; the reward is the team reward.
+One ``MultiDiscrete`` action holds every pursuer's move, or with continuous control one
+``Box(-1, 1, (N, 2))`` every pursuer's velocity command; the reward is the team reward.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ from .parallel import observation_space
 
 
 class PursuitEnv(gym.Env):
-    """All pursuers as one agent: ``MultiDiscrete([A] * N)`` actions, the team reward."""
+    """All pursuers as one agent: ``MultiDiscrete([A] * N)`` or ``Box(-1, 1, (N, 2))``
+    actions, the team reward."""
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
 
@@ -33,9 +35,11 @@ class PursuitEnv(gym.Env):
         self.render_mode = render_mode
         self.game = Game(self.scenario)
         self.observation_space = observation_space(self.scenario)
-        self.action_space = gym.spaces.MultiDiscrete(
-            [self.scenario.actions] * self.scenario.pursuers
-        )
+        n = self.scenario.pursuers
+        if self.scenario.continuous:
+            self.action_space = gym.spaces.Box(-1.0, 1.0, (n, 2), dtype=np.float32)
+        else:
+            self.action_space = gym.spaces.MultiDiscrete([self.scenario.actions] * n)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None

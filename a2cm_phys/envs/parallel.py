@@ -28,6 +28,15 @@ def observation_space(scenario: Scenario) -> spaces.Box:
     return spaces.Box(low, high, dtype=np.float32)
 
 
+def action_space(scenario: Scenario) -> spaces.Discrete | spaces.Box:
+    """One pursuer's actions: ``Discrete(4)`` (up, down, left, right), ``Discrete(5)`` with
+    stay, or with continuous control ``Box(-1, 1, (2,))``, its velocity command as a
+    fraction of ``max_speed`` (clipped to the unit disc by the env)."""
+    if scenario.continuous:
+        return spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+    return spaces.Discrete(scenario.actions)
+
+
 class PursuitParallelEnv:
     """The pursuit game for N pursuers, PettingZoo parallel style; the evader is scripted.
 
@@ -51,7 +60,7 @@ class PursuitParallelEnv:
         self.possible_agents = list(scenario.agents)
         self.agents: list[str] = []
         self._observation_space = observation_space(scenario)
-        self._action_space = spaces.Discrete(scenario.actions)
+        self._action_space = action_space(scenario)
         self.state_space = self._observation_space
         self.episode_seed: int | None = None
 
@@ -59,8 +68,8 @@ class PursuitParallelEnv:
         """Every pursuer observes the global state vector."""
         return self._observation_space
 
-    def action_space(self, agent: str) -> spaces.Discrete:
-        """``Discrete(4)`` (up, down, left, right) or ``Discrete(5)`` with stay."""
+    def action_space(self, agent: str) -> spaces.Discrete | spaces.Box:
+        """Every pursuer's action space (see :func:`action_space`)."""
         return self._action_space
 
     def reset(
@@ -73,7 +82,7 @@ class PursuitParallelEnv:
         info = self.game.info()
         return {a: obs for a in self.agents}, {a: dict(info) for a in self.agents}
 
-    def step(self, actions: Mapping[str, int]) -> tuple[dict, dict, dict, dict, dict]:
+    def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Move every pursuer (one action each) and the evader; see the class docstring."""
         if not self.agents:
             raise RuntimeError("step() called on a finished episode: call reset() first")
@@ -85,16 +94,10 @@ class PursuitParallelEnv:
             missing = [a for a in self.agents if a not in actions]
             unknown = [a for a in actions if a not in self.agents]
             raise ValueError(f"actions: missing {missing}, unknown {unknown}")
-        n_actions = self.scenario.actions
-        for agent, value in zip(self.agents, joint, strict=True):
-            if type(value) is int and 0 <= value < n_actions:  # the common case first
-                continue
-            integer = isinstance(value, np.integer) and not isinstance(value, bool)
-            if not integer or not 0 <= value < n_actions:
-                raise ValueError(
-                    f"invalid action {value!r} for {agent}: expected an integer in [0, {n_actions})"
-                )
-        out = self.game.step(np.array([joint], dtype=np.int64), checked=True)
+        if self.scenario.continuous:
+            out = self.game.step(self._commands(joint), checked=True)
+        else:
+            out = self.game.step(self._moves(joint), checked=True)
         obs = self.game.observation()
         info = self.game.info()
         reward = float(out.reward[0])
@@ -109,6 +112,30 @@ class PursuitParallelEnv:
             dict.fromkeys(agents, truncated),
             {a: info.copy() for a in agents},
         )
+
+    def _moves(self, joint: list[Any]) -> np.ndarray:
+        """The discrete joint action as ``(1, N)`` int64, or a ``ValueError`` naming the agent."""
+        n_actions = self.scenario.actions
+        for agent, value in zip(self.agents, joint, strict=True):
+            if type(value) is int and 0 <= value < n_actions:  # the common case first
+                continue
+            integer = isinstance(value, np.integer) and not isinstance(value, bool)
+            if not integer or not 0 <= value < n_actions:
+                raise ValueError(
+                    f"invalid action {value!r} for {agent}: expected an integer in [0, {n_actions})"
+                )
+        return np.array([joint], dtype=np.int64)
+
+    def _commands(self, joint: list[Any]) -> np.ndarray:
+        """The continuous joint action as ``(1, N, 2)`` float64, or a ``ValueError`` naming
+        the agent whose value is not two finite numbers (out-of-range ones are clipped)."""
+        try:
+            commands = np.array([joint], dtype=np.float64)
+        except (TypeError, ValueError):
+            commands = None
+        ok = commands is not None and commands.shape == (1, len(joint), 2)
+        if ok and np.isfinite(commands).all():  # the common case
+            return commands
 
     def state(self) -> np.ndarray:
         """The global state: the same vector every pursuer observes."""

@@ -12,15 +12,20 @@ are not added to the space: with its anchors at the centres and no position corr
 joint reads only their velocity, so chipmunk has nothing to integrate for them (bit-identical
 to adding them, which costs a quarter more objects to move at every reset).
 
-One env step is one second of simulated time in ``physics.substeps`` fixed substeps. The
-only Python work per substep is one call of chipmunk's step function, and per step one
-call per changed servo and per body read (see :data:`DIRECT_CALLS`). Contact callbacks
+One env step is one control period, ``physics.dt`` seconds of simulated time (1 s with
+discrete moves, 0.1 s by default with continuous control), in ``physics.substeps`` fixed
+substeps. A discrete action sets its servo to ``max_speed`` along its axis; a continuous
+command (clipped to the unit disc) sets it to that fraction of ``max_speed``. The evader
+is a policy given to the core (:class:`~.core.EvaderPolicy`; by default the scenario's
+scripted one) whose command drives its servo the same way. The only Python work per
+substep is one call of chipmunk's step function, and per step one call per (changed) servo
+and per body read (see :data:`DIRECT_CALLS`). Contact callbacks
 (:meth:`pymunk.Space.on_collision`) run only when shapes begin or stop touching and feed
 a :class:`~.contacts.ContactTracker`, which turns them into the step's events (debounced:
 see :mod:`.contacts`); the penalties are :func:`~.contacts.score_events`. Actions and the
-evader's moves are applied at the start of a step; since pymunk moves bodies before it
-solves velocities, an agent starting from rest covers ``max_speed × (1 − 1/substeps)`` in
-its first step and exactly ``max_speed`` per step once at speed.
+evader's commands are applied at the start of a step; since pymunk moves bodies before it
+solves velocities, an agent starting from rest covers ``max_speed · dt · (1 − 1/substeps)``
+in its first step and exactly ``max_speed · dt`` per step once at speed.
 """
 
 from __future__ import annotations
@@ -45,13 +50,16 @@ from .contacts import (
 )
 from .core import (
     ACTION_DELTAS,
+    EvaderPolicy,
     StepOutcome,
     agent_names,
+    clip_to_disc,
     default_start,
     parse_positions,
     settle,
 )
-from .evader import STAY, Evader
+from .evader import STAY
+from .factory import make_evader
 
 
 class CollisionType(IntEnum):
@@ -354,20 +362,18 @@ class StateViews:
 
 
 class PhysicsCore(StateViews):
-    """``num_envs`` independent physics games of one scenario (implements ``core.Core``)."""
+    """``num_envs`` independent physics games of one scenario (implements ``core.Core``).
 
-    def __init__(self, scenario: Scenario, num_envs: int = 1) -> None:
+    ``evader`` is the evader's policy (default: the scenario's scripted evader, see
+    :func:`~.factory.make_evader`)."""
+
+    def __init__(
+        self, scenario: Scenario, num_envs: int = 1, evader: EvaderPolicy | None = None
+    ) -> None:
         if scenario.mode != "physics":
             raise ValueError(f"PhysicsCore needs a physics scenario, got mode={scenario.mode!r}")
         ph, n = scenario.physics, scenario.pursuers
-        smallest = min(ph.box_side, 2 * ph.evader_radius)
-        if 2 * ph.max_speed / ph.substeps >= smallest:
-            raise ValueError(
-                f"physics.substeps = {ph.substeps} is too few: two agents closing at "
-                f"2 × max_speed would move {2 * ph.max_speed / ph.substeps:g} m per substep, "
-                f"enough to pass through a {smallest:g} m body; use more than "
-                f"{int(2 * ph.max_speed / smallest)} substeps"
-            )
+        ph.check_substeps()  # a ValueError naming physics.substeps
         self.scenario = scenario
         self.num_envs = num_envs
         self.t = np.zeros(num_envs, dtype=np.int64)
@@ -375,8 +381,9 @@ class PhysicsCore(StateViews):
         self._table = _pair_table(scenario)
         self._start = start_positions(scenario)
         radius = float(ph.evader_radius)  # the evader's centre stays this far from walls
-        self._evader = Evader(scenario, num_envs, radius, scenario.size - radius)
-        self._dt = 1.0 / ph.substeps
+        self._evader = evader or make_evader(scenario, num_envs, radius, scenario.size - radius)
+        self._continuous = scenario.continuous
+        self._dt = ph.dt / ph.substeps
         self._velocity = [tuple(v) for v in (ACTION_DELTAS * ph.max_speed).astype(float).tolist()]
         self._worlds = [World(scenario, self._start, self._table) for _ in range(num_envs)]
         self._spares: list[World] = []  # worlds rebuilt at the default start in advance
@@ -430,7 +437,10 @@ class PhysicsCore(StateViews):
     # ------------------------------------------------------------------ step
 
     def step(self, actions: np.ndarray) -> StepOutcome:
-        """Advance every game one second with the pursuers' ``(B, N)`` actions."""
+        """Advance every game one control period with the pursuers' ``(B, N)`` actions, or
+        their ``(B, N, 2)`` velocity commands with continuous control."""
+        if self._continuous:
+            return self._step_continuous(actions)
         sc, n = self.scenario, self.scenario.pursuers
         pos = self._state[:, 0]
         evader = self._evader.moves(self.episode_seed, self.t, pos[:, n], pos[:, :n])
@@ -450,6 +460,29 @@ class PhysicsCore(StateViews):
                     if a != was:
                         steer(velocity[a])
                         commands[i] = a
+            space_step = world.step
+            for _ in substeps:
+                space_step(dt)
+            events.append(world.tracker.end_step(step))
+            for probe in world.probes:
+                v = probe()
+                state += v.x, v.y
+        self._state[:] = np.array(state).reshape(self._state.shape)
+        return self._score(events, evader)
+
+    def _step_continuous(self, actions: np.ndarray) -> StepOutcome:
+        n = self.scenario.pursuers
+        pos = self._state[:, 0]
+        evader = self._evader.moves(self.episode_seed, self.t, pos[:, n], pos[:, :n])
+        self.t += 1
+        commands = np.concatenate((actions, evader[:, None]), axis=1)
+        velocities = (clip_to_disc(commands) * self.scenario.physics.max_speed).tolist()
+        dt, substeps = self._dt, range(self.scenario.physics.substeps)
+        state = []
+        events = []
+        for world, row, step in zip(self._worlds, velocities, self.t.tolist(), strict=True):
+            for steer, v in zip(world.steering, row, strict=True):
+                steer(v)
             space_step = world.step
             for _ in substeps:
                 space_step(dt)

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Scenario
-from .core import StepOutcome, check_actions
+from .core import StepOutcome, action_shape, check_joint_actions
 from .factory import make_core
 
 
@@ -61,7 +61,8 @@ class VectorEnv:
         self.scenario = scenario
         self.num_envs = num_envs
         self.n_agents = scenario.pursuers
-        self.n_actions = scenario.actions
+        self.n_actions = scenario.actions  # discrete moves (unused with continuous control)
+        self.action_shape = action_shape(scenario)  # one game's joint action
         self.obs_dim = scenario.obs_dim
         self.core = make_core(scenario, num_envs, workers)
         self._seeds = np.random.default_rng(0)
@@ -117,9 +118,10 @@ class VectorEnv:
         return self.core.episode_seed.copy()
 
     def step(self, actions: np.ndarray, validate: bool = True) -> VecStep:
-        """Step every game with pursuer ``actions`` ``(B, N)``; restart finished games."""
+        """Step every game with pursuer ``actions`` ``(B, N)`` (``(B, N, 2)`` commands with
+        continuous control); restart finished games."""
         if validate:
-            check_actions(actions, self.n_actions, self.scenario.agents)
+            check_joint_actions(self.scenario, actions)
         core = self.core
         seeds, lengths = core.episode_seed.copy(), core.t + 1
         out = core.step(actions)

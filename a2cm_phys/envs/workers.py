@@ -59,14 +59,16 @@ class SharedBatch:
 
     def __init__(self, scenario: Scenario, num_envs: int, ctx: Any) -> None:
         n = scenario.pursuers
+        # continuous control: float64 (vx, vy) commands for the pursuers and the evader
+        command = (np.dtype(np.float64), (2,)) if scenario.continuous else (np.dtype(np.int64), ())
         self.layout: list[tuple[str, np.dtype, tuple[int, ...]]] = [
-            ("actions", np.dtype(np.int64), (n,)),
+            ("actions", command[0], (n, *command[1])),
             ("seed", np.dtype(np.uint64), ()),
             ("state", np.dtype(np.float64), (2, n + 1, 2)),
             ("reward", np.dtype(np.float64), ()),
             ("collisions", np.dtype(np.int64), ()),
             ("wall_contacts", np.dtype(np.int64), ()),
-            ("evader_action", np.dtype(np.int64), ()),
+            ("evader_action", *command),
             ("terminated", np.dtype(np.bool_), ()),
             ("truncated", np.dtype(np.bool_), ()),
             ("captured", np.dtype(np.bool_), ()),
