@@ -136,6 +136,18 @@ class PursuitParallelEnv:
         ok = commands is not None and commands.shape == (1, len(joint), 2)
         if ok and np.isfinite(commands).all():  # the common case
             return commands
+        def bad(value: Any) -> bool:
+            try:
+                pair = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                return True
+            return pair.shape != (2,) or not np.isfinite(pair).all()
+
+        k = next((k for k, value in enumerate(joint) if bad(value)), 0)
+        raise ValueError(
+            f"invalid action {joint[k]!r} for {self.agents[k]}: expected two finite numbers"
+            " (a velocity command as a fraction of max_speed)"
+        )
 
     def state(self) -> np.ndarray:
         """The global state: the same vector every pursuer observes."""
