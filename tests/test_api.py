@@ -16,6 +16,13 @@ from a2cm_phys.envs.vector import VectorEnv
 ALL_SCENARIOS = scenario_names()
 
 
+def random_actions(scenario, agents, rng):
+    """One random action per agent: a move, or a velocity command (continuous control)."""
+    if scenario.continuous:
+        return {a: rng.uniform(-1, 1, 2).astype(np.float32) for a in agents}
+    return {a: int(rng.integers(4)) for a in agents}
+
+
 @pytest.mark.parametrize("scenario", ALL_SCENARIOS)
 def test_pettingzoo_parallel_api(scenario):
     parallel_api_test(make_env(scenario, max_steps=60), num_cycles=200)
@@ -30,7 +37,8 @@ def test_pettingzoo_seed(scenario):
 def test_gymnasium_env_checker(scenario):
     env = gym.make(a2cm_phys.GYM_ID, scenario=scenario, max_steps=60)
     check_env(env.unwrapped, skip_render_check=True)
-    assert isinstance(env.action_space, gym.spaces.MultiDiscrete)
+    joint = gym.spaces.Box if env.unwrapped.scenario.continuous else gym.spaces.MultiDiscrete
+    assert isinstance(env.action_space, joint)
 
 
 def test_gymnasium_joint_view_gives_the_team_reward():
@@ -51,8 +59,7 @@ def test_same_seed_same_trajectory(scenario):
         for _ in range(120):
             if not env.agents:
                 obs, _ = env.reset()
-            acts = {a: int(rng.integers(4)) for a in env.agents}
-            obs, *_ = env.step(acts)
+            obs, *_ = env.step(random_actions(env.scenario, env.agents, rng))
             trace.append(obs["pursuer_0"])
         return np.stack(trace)
 

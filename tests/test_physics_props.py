@@ -6,9 +6,11 @@ more than half into each other, and no agent faster than twice ``max_speed`` (th
 drive to ``max_speed``; pushes add a sideways component, never a blow-up). Bodies do
 overlap briefly on impact, by up to the distance they close in one substep (0.2 m at
 full speed head-on with the default 10 substeps): that is the solver's resolution, not
-tunnelling. Hypothesis draws action programs over every phys scenario; three adversarial
-batches (a pile-up in a corner, head-on slams at full speed, stiff servos) bring the
-total over 10⁵ steps.
+tunnelling. Hypothesis draws action programs over every discrete phys scenario, and
+programs of velocity commands over every continuous one; four adversarial batches (a
+pile-up in a corner, head-on slams at full speed with moves and with velocity commands,
+stiff servos) bring the total over 10⁵ steps. (Continuous scenarios close at most 0.1 m
+per substep: 2 m/s over 0.05 s.)
 """
 
 from __future__ import annotations
@@ -22,8 +24,9 @@ from a2cm_phys.config import load_scenario, scenario_names
 from a2cm_phys.envs.physics import PhysicsCore
 
 UP, DOWN, LEFT, RIGHT, STAY = range(5)
-PHYS = [name for name in scenario_names() if name.startswith("phys")]
-ADVERSARIAL_GAMES, ADVERSARIAL_STEPS = 32, 1_100  # 3 batches: 105,600 steps
+CONT = [name for name in scenario_names() if name.startswith("phys_cont")]
+PHYS = [name for name in scenario_names() if name.startswith("phys") and name not in CONT]
+ADVERSARIAL_GAMES, ADVERSARIAL_STEPS = 32, 1_100  # 4 batches: 140,800 steps
 
 
 def check(core: PhysicsCore, overlaps: bool = True) -> None:
@@ -79,6 +82,37 @@ def test_action_programs_keep_the_world_sound(name, evader, n_actions, program, 
     run(PhysicsCore(sc, batch), actions, seed)
 
 
+command_segments = st.lists(
+    st.tuples(
+        st.integers(1, 40),  # steps (0.1 s each)
+        st.lists(  # per pursuer: heading (turns) and length, up to past the unit disc
+            st.tuples(st.floats(0, 1), st.floats(0, 1.5)), min_size=3, max_size=3
+        ),
+    ),
+    min_size=1,
+    max_size=10,
+)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    name=st.sampled_from(CONT),
+    evader=st.sampled_from(["random", "flee", "static"]),
+    program=command_segments,
+    seed=st.integers(0, 2**32),
+)
+def test_command_programs_keep_the_world_sound(name, evader, program, seed):
+    """Each game plays the drawn program of velocity commands turned by ``g / batch`` of a
+    turn, ``g`` the game's index."""
+    sc = load_scenario(name, {"evader": evader})
+    batch = 12
+    rows = [np.array(cmds) for length, cmds in program for _ in range(length)]
+    turns, length = np.stack(rows)[..., 0], np.stack(rows)[..., 1]  # (T, N)
+    angle = 2 * np.pi * (turns[:, None] + np.arange(batch)[None, :, None] / batch)
+    actions = length[:, None, :, None] * np.stack((np.cos(angle), np.sin(angle)), axis=-1)
+    run(PhysicsCore(sc, batch), actions, seed)
+
+
 @pytest.mark.slow
 def test_pile_up_in_a_corner():
     """Everyone (the fleeing evader too, when cornered) pushes into one corner per game."""
@@ -108,6 +142,21 @@ def test_head_on_slams_at_full_speed():
         axis=-1,
     )
     run(PhysicsCore(sc, ADVERSARIAL_GAMES), actions, 22)
+
+
+@pytest.mark.slow
+def test_continuous_slams_and_random_commands():
+    """Continuous control: pursuers 0 and 1 charge each other and back off at full speed
+    (game g turns around every g % 12 + 1 control steps), 2 takes random commands, some
+    far outside the unit disc."""
+    sc = load_scenario("phys_cont_collision_continue", {"evader": "flee"})
+    period = np.arange(ADVERSARIAL_GAMES) % 12 + 1
+    sign = 1.0 - 2.0 * ((np.arange(ADVERSARIAL_STEPS)[:, None] // period[None]) % 2)  # (T, B)
+    rng = np.random.default_rng(44)
+    actions = np.zeros((ADVERSARIAL_STEPS, ADVERSARIAL_GAMES, sc.pursuers, 2))
+    actions[:, :, 0, 0], actions[:, :, 1, 0] = sign, -sign
+    actions[:, :, 2] = rng.uniform(-3, 3, (ADVERSARIAL_STEPS, ADVERSARIAL_GAMES, 2))
+    run(PhysicsCore(sc, ADVERSARIAL_GAMES), actions, 55)
 
 
 @pytest.mark.slow
