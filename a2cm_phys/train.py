@@ -9,7 +9,12 @@ game) and takes one learner step. A run lives in ``<logdir>/<scenario>-<algo>-s<
   written atomically every ``checkpoint_seconds`` (or ``checkpoint_every`` updates), on
   Ctrl-C and at the end;
 - ``summary.json``: episode counts, mean length, collisions, captures, time, speed;
-- ``episodes.mcap``: the episode log (:mod:`a2cm_phys.record`; not continued on resume yet).
+- ``episodes.mcap``: the episode log (:mod:`a2cm_phys.record`); each resumed session adds
+  a part ``episodes-from-NNNNNN.mcap`` (see :mod:`a2cm_phys.record.parts`).
+
+Ctrl-C and SIGTERM stop at the end of the update with a checkpoint (exit 130 or 143), a
+dead physics worker with a checkpoint at the last whole update (exit 4); each prints the
+command that resumes the run.
 
 ``--resume RUN_DIR`` continues bit for bit in grid mode (an interrupted and resumed run
 ends with the same weights and episode statistics as an uninterrupted one). In physics
@@ -22,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
+import signal
 import sys
 from collections.abc import Sequence
 from datetime import datetime
@@ -29,15 +35,18 @@ from pathlib import Path
 from typing import Any
 
 from . import checkpoint
-from .config import (
-    ConfigError,
-    Scenario,
-    Train,
-    load_scenario,
-    load_train,
-    parse_assignments,
-    to_dict,
+from .cli import (
+    SEED,
+    Parser,
+    UsageError,
+    add_scenario_options,
+    int_range,
+    run_cli,
+    scenario_from_args,
+    train_from_args,
+    writable_dir,
 )
+from .config import Scenario, Train, to_dict
 from .trainer import (
     EXIT_INTERRUPTED,
     EXIT_NONFINITE,
@@ -47,7 +56,21 @@ from .trainer import (
     policy_rng,
 )
 
-__all__ = ["EXIT_INTERRUPTED", "EXIT_NONFINITE", "Trainer", "build_parser", "main", "policy_rng"]
+__all__ = [
+    "EXIT_INTERRUPTED",
+    "EXIT_NONFINITE",
+    "EXIT_WORKER_DIED",
+    "Trainer",
+    "build_parser",
+    "main",
+    "policy_rng",
+]
+
+EXIT_WORKER_DIED = 4
+"""Exit status when a physics worker died (the checkpoint holds the last whole update)."""
+
+RUN_FILES = ("checkpoint.pt", "config.json", "summary.json", "episodes.mcap")
+"""Files that make a folder a run directory (besides ``episodes-from-*.mcap``)."""
 
 # ---------------------------------------------------------------------- command line
 
@@ -56,39 +79,35 @@ _TRAIN_FLAGS = (
     "reward_scale", "max_grad_norm", "device", "threads", "workers",
 )  # fmt: skip
 
+_COUNT = int_range(1)
+_EVERY = int_range(0)
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m a2cm_phys.train`` argument parser."""
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog="python -m a2cm_phys.train",
         description="Train A2CM (one shared critic) or A2C (N actor-critic pairs).",
     )
-    p.add_argument("--scenario", help="scenario name (scenarios/*.toml) or TOML path")
+    add_scenario_options(p)
     p.add_argument("--algo", choices=["a2cm", "a2c"])
-    p.add_argument("--num-envs", type=int, help="parallel games (1 = the paper's setting)")
-    p.add_argument("--updates", type=int, help="gradient updates (default 5000)")
-    p.add_argument("--batch-size", type=int, help="steps per update over all games (128)")
-    p.add_argument("--seed", type=int)
+    p.add_argument("--num-envs", type=_COUNT, help="parallel games (1 = the paper's setting)")
+    p.add_argument("--updates", type=_COUNT, help="gradient updates (default 5000)")
+    p.add_argument("--batch-size", type=_COUNT, help="steps per update over all games (128)")
+    p.add_argument("--seed", type=SEED)
     p.add_argument("--lr", type=float)
     p.add_argument("--reward-scale", type=float)
     p.add_argument("--max-grad-norm", type=float, help="0 disables clipping")
-    p.add_argument("--device")
-    p.add_argument("--threads", type=int, help="torch threads (default 1)")
-    p.add_argument("--workers", type=int, help="physics: processes stepping the games (1)")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="scenario override (rewards.step=-2), or train.KEY=VALUE for any Train field",
-    )
+    p.add_argument("--device", help="torch device: cpu (default), cuda, cuda:1, mps")
+    p.add_argument("--threads", type=_COUNT, help="torch threads (default 1)")
+    p.add_argument("--workers", type=_COUNT, help="physics: processes stepping the games (1)")
     p.add_argument("--logdir", default="logs", help="parent folder of run directories")
     p.add_argument("--run-dir", help="exact run directory (instead of one under --logdir)")
     p.add_argument("--resume", metavar="RUN_DIR", help="continue a run (--updates may extend it)")
-    p.add_argument("--log-every", type=int, default=1, help="recorder: log every K-th episode")
-    p.add_argument("--scene-every", type=int, default=0, help="recorder: scenes every K (0 off)")
+    p.add_argument("--log-every", type=_EVERY, default=1, help="log every K-th episode (0 none)")
+    p.add_argument("--scene-every", type=_EVERY, default=0, help="scenes every K (0 off)")
     p.add_argument("--no-record", action="store_true", help="no MCAP episode log")
-    p.add_argument("--checkpoint-every", type=int, default=0, help="also save every K updates")
+    p.add_argument("--checkpoint-every", type=_EVERY, default=0, help="also save every K updates")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -96,7 +115,10 @@ def build_parser() -> argparse.ArgumentParser:
 def make_run_dir(logdir: str | Path, scenario: Scenario, cfg: Train) -> Path:
     """Create ``<logdir>/<scenario>-<algo>-s<seed>-<YYYYmmdd-HHMMSS>[-k]/`` and return it."""
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    base = Path(logdir) / f"{scenario.name}-{cfg.algo}-s{cfg.seed}-{stamp}"
+    logdir = Path(logdir)
+    base = logdir / f"{scenario.name}-{cfg.algo}-s{cfg.seed}-{stamp}"
+    if base.resolve().parent != logdir.resolve():  # config.check_limits forbids such names
+        raise UsageError(f"scenario name {scenario.name!r} would leave --logdir {logdir}")
     for k in range(1000):
         path = base if k == 0 else base.with_name(f"{base.name}-{k}")
         try:
@@ -105,6 +127,23 @@ def make_run_dir(logdir: str | Path, scenario: Scenario, cfg: Train) -> Path:
         except FileExistsError:
             continue
     raise FileExistsError(f"{base}: too many runs with this name")
+
+
+def check_new_run_dir(run_dir: Path) -> None:
+    """A :class:`UsageError` unless ``run_dir`` can take a new run: it must not hold a run
+    (a checkpoint: ``--resume`` it) nor a run's files (which a new run would overwrite)."""
+    if run_dir.exists() and not run_dir.is_dir():
+        raise UsageError(f"--run-dir {run_dir}: is a file")
+    if (run_dir / checkpoint.CHECKPOINT_NAME).exists():
+        raise UsageError(f"--run-dir {run_dir}: holds a run already (use --resume)")
+    found = [f for f in RUN_FILES if (run_dir / f).exists()]
+    found += sorted(p.name for p in run_dir.glob("episodes-from-*.mcap"))
+    if found:
+        raise UsageError(
+            f"--run-dir {run_dir}: holds {', '.join(found)} of an earlier run but no checkpoint;"
+            " a new run would overwrite them (choose another folder or move them away)"
+        )
+    writable_dir(run_dir, "--run-dir")
 
 
 def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
@@ -119,28 +158,26 @@ def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
         fixed = [f"--{k.replace('_', '-')}" for k in _TRAIN_FLAGS if k != "updates"]
         given = [f for f in fixed if getattr(args, f[2:].replace("-", "_")) is not None]
         given += ["--scenario"] * bool(args.scenario) + ["--set"] * bool(args.set)
-        given += ["--run-dir"] * bool(args.run_dir)
+        given += ["--run-dir"] * bool(args.run_dir) + ["--preset"] * bool(args.preset)
         if given:
-            raise ConfigError(f"--resume: {', '.join(given)} cannot change when resuming")
+            raise UsageError(f"--resume: {', '.join(given)} cannot change when resuming")
+        run = Path(args.resume)
+        writable_dir(run if run.is_dir() else run.parent, "--resume")
         trainer = Trainer.resume(args.resume, args.updates, **options)
         _append_command(trainer.run_dir, command, trainer.update, trainer.cfg)
         return trainer
     if not args.scenario:
-        raise ConfigError("--scenario is required (or --resume RUN_DIR)")
-    assignments = parse_assignments(args.set)
-    train_set = {k[len("train.") :]: v for k, v in assignments.items() if k.startswith("train.")}
-    scenario_set = {k: v for k, v in assignments.items() if not k.startswith("train.")}
-    scenario = load_scenario(args.scenario, scenario_set)
-    flags = {k: getattr(args, k) for k in _TRAIN_FLAGS if getattr(args, k) is not None}
-    cfg = load_train({**train_set, **flags})
+        raise UsageError("--scenario is required (or --resume RUN_DIR)")
+    scenario = scenario_from_args(args)
+    cfg = train_from_args(args, {k: getattr(args, k) for k in _TRAIN_FLAGS})
     check_seed(cfg)  # before the run directory exists
     check_workers(scenario, cfg)
     if args.run_dir:
         run_dir = Path(args.run_dir)
-        if (run_dir / checkpoint.CHECKPOINT_NAME).exists():
-            raise ConfigError(f"--run-dir {run_dir}: holds a run already (use --resume)")
+        check_new_run_dir(run_dir)
         run_dir.mkdir(parents=True, exist_ok=True)
     else:
+        writable_dir(args.logdir, "--logdir")
         run_dir = make_run_dir(args.logdir, scenario, cfg)
     write_config(run_dir, scenario, cfg, command)
     return Trainer(scenario, cfg, run_dir, **options)
@@ -173,14 +210,13 @@ def _print_summary(summary: dict[str, Any]) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m a2cm_phys.train``; returns the exit status."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    return run_cli(_main, argv)
+
+
+def _main(argv: Sequence[str]) -> int:
     args = build_parser().parse_args(argv)
     command = shlex.join(["python", "-m", "a2cm_phys.train", *argv])
-    try:
-        trainer = _trainer_from_args(args, command)
-    except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    trainer = _trainer_from_args(args, command)
     print(f"run directory: {trainer.run_dir}", file=sys.stderr)
     try:
         status = trainer.run()
@@ -189,11 +225,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     _print_summary(trainer.last_summary)
     resume = f"python -m a2cm_phys.train --resume {shlex.quote(str(trainer.run_dir))}"
     if status == "interrupted":
+        signum = trainer.stop_signal or signal.SIGINT
         print(
-            f"interrupted: checkpoint at update {trainer.saved_update}; resume with:\n  {resume}",
+            f"interrupted ({signal.Signals(signum).name}): checkpoint at update"
+            f" {trainer.saved_update}; resume with:\n  {resume}",
             file=sys.stderr,
         )
-        return EXIT_INTERRUPTED
+        return EXIT_INTERRUPTED if signum == signal.SIGINT else 128 + signum
+    if status == "worker_died":
+        print(
+            f"stopped: {trainer.stop_reason}\ncheckpoint at update {trainer.saved_update};"
+            f" resume with:\n  {resume}",
+            file=sys.stderr,
+        )
+        return EXIT_WORKER_DIED
     if status == "nonfinite":
         print(
             f"stopped: {trainer.stop_reason} at update {trainer.update + 1}; the last"

@@ -121,11 +121,11 @@ def test_nonfinite_loss_stops_and_keeps_last_good_checkpoint(
 ) -> None:
     update, calls = Learner.update, []
 
-    def failing_update(self: Learner, batch: object) -> dict[str, float]:
+    def failing_update(self: Learner, *args: object) -> dict[str, float]:
         calls.append(1)
         if len(calls) == 8:
             raise NonFiniteLoss("non-finite loss nan (no step taken)", {})
-        return update(self, batch)
+        return update(self, *args)
 
     monkeypatch.setattr(Learner, "update", failing_update)
     code, run_dir = _run(tmp_path, *GRID, "--updates", "20", "--checkpoint-every", "5")

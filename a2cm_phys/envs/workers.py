@@ -21,9 +21,14 @@ per episode seed, so a ``ProcessCore`` gives exactly the trajectories of a singl
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import gc
 import multiprocessing as mp
+import os
 import signal
+import sys
+import threading
+import time
 import traceback
 from collections.abc import Mapping, Sequence
 from dataclasses import fields
@@ -95,17 +100,65 @@ def _bytes(dtype: np.dtype, num_envs: int, tail: tuple[int, ...]) -> int:
     return -(-size // 8) * 8
 
 
+_PR_SET_PDEATHSIG = 1
+"""Linux ``prctl`` option: the signal a process gets when its parent dies."""
+
+PARENT_POLL_SECONDS = 1.0
+"""How often a worker checks that its parent is alive, where the kernel cannot tell it."""
+
+
+def _die_with_parent(parent: int) -> None:
+    """End this worker when process ``parent`` ends, however it ends (SIGKILL included).
+
+    Waiting for the pipe's EOF is not enough: with ``fork``, every worker inherits the
+    parent's ends of the pipes, so no pipe closes when the parent dies. On Linux the kernel
+    sends SIGKILL when the parent dies (``PR_SET_PDEATHSIG``); everywhere, a daemon thread
+    also polls whether the parent still exists (it is not our direct parent under
+    ``forkserver``).
+    """
+    if sys.platform.startswith("linux") and os.getppid() == parent:
+        with contextlib.suppress(OSError, AttributeError):
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    first_ppid = os.getppid()
+
+    def orphaned() -> bool:
+        if first_ppid == parent and os.getppid() != parent:  # re-parented: the parent died
+            return True
+        try:
+            os.kill(parent, 0)
+        except ProcessLookupError:
+            return True
+        except PermissionError:  # a process of someone else now has that pid
+            return True
+        return False
+
+    if orphaned():  # it died before the kernel was told to watch it
+        os._exit(1)
+
+    def watch() -> None:
+        while not orphaned():
+            time.sleep(PARENT_POLL_SECONDS)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="a2cm-parent-watch", daemon=True).start()
+
+
 def _serve(
     conn: Connection,
     scenario: Scenario,
     shared: SharedBatch,
     games: tuple[int, int],
     spares: int,
+    parent: int | None = None,
 ) -> None:
     """A worker's loop: build a core for games ``lo:hi``, then on each request apply the
     resets marked in ``shared`` and step, rebuilding up to ``spares`` worlds for later
-    resets while it waits."""
+    resets while it waits. It ends with process ``parent`` (see :func:`_die_with_parent`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the handler a fork may inherit
+    if parent is not None:
+        _die_with_parent(parent)
     try:
         lo, hi = games
         core = PhysicsCore(scenario, hi - lo)
@@ -159,8 +212,8 @@ def _report(conn: Connection, err: Exception) -> None:
 class ProcessCore(StateViews):
     """``num_envs`` physics games stepped by ``workers`` processes (implements ``core.Core``).
 
-    Call :meth:`close` (or use it as a context manager) to stop the workers; they are
-    daemons, so they also end with the parent. A worker that dies raises
+    Call :meth:`close` (or use it as a context manager) to stop the workers; they also
+    end when the parent process dies, whatever killed it. A worker that dies raises
     :class:`WorkerError` naming it and its exit code at the next call, and so does one that
     is alive but has not answered for ``timeout`` seconds (``None``: wait for ever); either
     way the core is closed. ``start_method`` is
@@ -207,7 +260,14 @@ class ProcessCore(StateViews):
             ahead = len(games) // 4 + 1 if spares is None else spares
             proc = ctx.Process(
                 target=_serve,
-                args=(child, scenario, self._shared, (int(games[0]), int(games[-1]) + 1), ahead),
+                args=(
+                    child,
+                    scenario,
+                    self._shared,
+                    (int(games[0]), int(games[-1]) + 1),
+                    ahead,
+                    os.getpid(),
+                ),
                 name=f"a2cm-physics-{i}",
                 daemon=True,
             )

@@ -21,7 +21,9 @@ import zstandard
 from mcap.exceptions import InvalidMagic, McapError
 from mcap.records import Channel, Footer, Message, Metadata
 from mcap.stream_reader import StreamReader
+from mcap.writer import MCAP0_MAGIC
 
+from ..cli import UsageError
 from ..config import ConfigError, Scenario, build
 from .schemas import (
     METADATA_NAME,
@@ -33,7 +35,7 @@ from .schemas import (
 )
 
 
-class LogError(Exception):
+class LogError(UsageError):
     """A run log cannot be read (missing, not an MCAP, not ours); the message says why."""
 
 
@@ -121,6 +123,8 @@ class RunLog:
     updates: list[dict[str, Any]]
     clean: bool
     error: str | None = None
+    damaged: bool = False  # closed cleanly, but a record fails its checks (not a crash)
+    parts: list[Path] = field(default_factory=list)  # the files read (a run folder: all parts)
     topic_counts: dict[str, int] = field(default_factory=dict)
     _blocks: list[bytes] = field(default_factory=list, repr=False)
     _where: dict[int, int] = field(default_factory=dict, repr=False)
@@ -182,14 +186,23 @@ _TRUNCATION_ERRORS = (McapError, struct.error, ValueError, zstandard.ZstdError, 
 
 
 def read_run(path: str | Path) -> RunLog:
-    """Read ``path`` (an ``episodes.mcap`` or a run folder holding one).
+    """Read a run folder (every part of its log, see :mod:`.parts`) or one log file.
 
     Raises :class:`LogError` if the file is missing or is not an MCAP file; a file that
-    ends early is read up to its last complete chunk (``clean`` is then ``False``).
+    ends early is read up to its last complete chunk (``clean`` is then ``False``), and so
+    is a damaged one (``damaged`` is then ``True`` as well).
     """
     path = Path(path)
     if path.is_dir():
-        path = path / "episodes.mcap"
+        from .parts import read_run_dir
+
+        return read_run_dir(path)
+    return read_file(path)
+
+
+def read_file(path: str | Path) -> RunLog:
+    """Read one log file (see :func:`read_run`)."""
+    path = Path(path)
     if not path.is_file():
         raise LogError(f"{path}: no such file")
     metadata: dict[str, Any] = {}
@@ -199,7 +212,7 @@ def read_run(path: str | Path) -> RunLog:
     where: dict[int, int] = {}
     counts: dict[str, int] = {}
     topics: dict[int, str] = {}
-    clean, error = False, None
+    clean, error, damaged = False, None, False
     with open(path, "rb") as fh:
         reader = StreamReader(fh, validate_crcs=True)
         records = reader.records
@@ -229,8 +242,9 @@ def read_run(path: str | Path) -> RunLog:
                 raise LogError(
                     f"{path}: not an MCAP run log, or cut before its metadata ({_describe(err)})"
                 ) from None
-            error = _describe(err)
+            error = f"{_describe(err)} near byte {fh.tell():,}"
             clean = False  # a footer without the closing magic is not a clean end
+            damaged = _ends_with_magic(fh)
     if not metadata:
         raise LogError(f"{path}: not an a2cm_phys run log (no '{METADATA_NAME}' metadata)")
     return RunLog(
@@ -240,10 +254,21 @@ def read_run(path: str | Path) -> RunLog:
         updates=updates,
         clean=clean,
         error=error,
+        damaged=damaged,
+        parts=[path],
         topic_counts=counts,
         _blocks=blocks,
         _where=where,
     )
+
+
+def _ends_with_magic(fh: Any) -> bool:
+    """Whether the file ends as a closed MCAP file does: then a read error is damage."""
+    fh.seek(0, 2)
+    if fh.tell() < 2 * len(MCAP0_MAGIC):
+        return False
+    fh.seek(-len(MCAP0_MAGIC), 2)
+    return fh.read() == MCAP0_MAGIC
 
 
 def _episode_ids(data: bytes) -> list[int]:

@@ -238,7 +238,9 @@ class EpisodeRecorder:
         core = vec_env.core
         pos, vel = core.positions(), core.velocities()
         b, agents = vec_env.num_envs, vec_env.n_agents + 1
-        self._cap = max(2048, 2 * (self.scenario.max_steps + 2))
+        # Room for two whole episodes, up to a bound: longer ones grow it (see _make_room),
+        # so memory follows the episodes that happen, not max_steps.
+        self._cap = min(max(2048, 2 * (self.scenario.max_steps + 2)), 8192)
         shape = (self._cap, b)
         self._pos = np.zeros((*shape, agents, 2), dtype=pos.dtype)
         self._spos = np.zeros_like(self._pos)  # positions after auto-reset (episode starts)
