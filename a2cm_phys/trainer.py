@@ -186,37 +186,55 @@ class Trainer:
 
     # ------------------------------------------------------------------ training
     def run(self) -> str:
-        """Train up to ``cfg.updates``; return ``"done"``, ``"interrupted"`` or ``"nonfinite"``.
+        """Train up to ``cfg.updates``; return ``"done"``, ``"interrupted"``, ``"nonfinite"``
+        or ``"worker_died"``.
 
-        The first Ctrl-C stops at the end of the current update (a second one stops at
-        once); either way the checkpoint holds the state after the last whole update. A
-        non-finite loss stops the run without overwriting the last good checkpoint.
+        The first Ctrl-C or SIGTERM stops at the end of the current update (a second one
+        stops at once, but never in the middle of writing the log); either way the
+        checkpoint holds the state after the last whole update. Once stopping, while the
+        checkpoint, the log and the summary are written, further signals are ignored. A
+        non-finite loss stops the run without overwriting the last good checkpoint. A
+        physics worker that dies stops the run with the checkpoint at the last whole update
+        (:attr:`stop_reason` names the worker). :attr:`stop_signal` is the signal that
+        stopped an interrupted run.
         """
         if not (self.run_dir / checkpoint.CHECKPOINT_NAME).exists():
             self.save_checkpoint()  # so there is always a last good checkpoint
         self._last_save = time.perf_counter()
         status = "done"
-        with self._sigint_deferred(), self._recorder() as recorder, self._bar() as bar:
-            on_step = recorder.record_step if recorder is not None else None
-            try:
-                while self.update < self.cfg.updates:
-                    if self._stop_requested:
-                        raise KeyboardInterrupt
-                    self._one_update(on_step)
-                    if recorder is not None:
-                        recorder.record_update(self.update, self.last_metrics)
-                    bar.tick()
-                    self._maybe_save()
-            except KeyboardInterrupt:
-                status = "interrupted"
-                if self._phase != _LEARN:  # mid-update weights could be half-stepped
+        dead_worker = _worker_error(self.scenario)
+        with self._signals_deferred() as signals:
+            with self._recorder() as recorder, self._bar() as bar:
+                log = _ShieldedLog(recorder, signals) if recorder is not None else None
+                on_step = log.record_step if log is not None else None
+                try:
+                    while self.update < self.cfg.updates:
+                        if signals.stop_requested:
+                            raise KeyboardInterrupt
+                        self._one_update(on_step)
+                        if log is not None:
+                            log.record_update(self.update, self.last_metrics)
+                        bar.tick()
+                        self._maybe_save()
+                except KeyboardInterrupt:
+                    signals.shield()
+                    status = "interrupted"
+                    if self._phase != _LEARN:  # mid-update weights could be half-stepped
+                        self.save_checkpoint(self._state_at_last_update())
+                except NonFiniteLoss as err:
+                    signals.shield()
+                    status = "nonfinite"
+                    self.stop_reason = str(err)
+                except dead_worker as err:
+                    signals.shield()
+                    status = "worker_died"
+                    self.stop_reason = str(err).splitlines()[0]
                     self.save_checkpoint(self._state_at_last_update())
-            except NonFiniteLoss as err:
-                status = "nonfinite"
-                self.stop_reason = str(err)
-            else:
-                self.save_checkpoint()
-        self._write_summary(status)
+                else:
+                    signals.shield()
+                    self.save_checkpoint()
+            self.stop_signal = signals.received
+            self._write_summary(status)
         return status
 
     def _one_update(self, on_step: StepHook | None) -> None:
@@ -245,23 +263,18 @@ class Trainer:
             self.save_checkpoint()
 
     @contextmanager
-    def _sigint_deferred(self) -> Iterator[None]:
-        """First SIGINT: finish the update, then stop; the second raises KeyboardInterrupt."""
+    def _signals_deferred(self) -> Iterator[_Signals]:
+        """SIGINT and SIGTERM handled by a :class:`_Signals` for the time of the block."""
+        signals = _Signals()
         if threading.current_thread() is not threading.main_thread():
-            yield
+            yield signals
             return
-
-        def handler(signum: int, frame: Any) -> None:
-            if self._stop_requested:
-                raise KeyboardInterrupt
-            self._stop_requested = True
-            print("\nstopping after this update (Ctrl-C again: at once)", file=sys.stderr)
-
-        previous = signal.signal(signal.SIGINT, handler)
+        previous = {s: signal.signal(s, signals.handle) for s in _STOP_SIGNALS}
         try:
-            yield
+            yield signals
         finally:
-            signal.signal(signal.SIGINT, previous if previous is not None else signal.SIG_DFL)
+            for s, handler in previous.items():
+                signal.signal(s, handler if handler is not None else signal.SIG_DFL)
 
     def _recorder(self) -> Any:
         """The MCAP episode recorder, or a null context when it is not available."""
@@ -310,6 +323,80 @@ class Trainer:
         (self.run_dir / "summary.json").write_text(json.dumps(strict, indent=2) + "\n")
 
 
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+"""Signals that stop a run cleanly: Ctrl-C, and what ``timeout``, Slurm and Ray send."""
+
+
+class _Signals:
+    """What the stop signals asked: the first one requests a stop at the end of the update,
+    the second stops at once (raises ``KeyboardInterrupt``, but only between log writes);
+    after :meth:`shield`, while the run is being saved, signals are only acknowledged."""
+
+    def __init__(self) -> None:
+        self.stop_requested = False
+        self.received: int | None = None  # the first stop signal
+        self.in_log = False  # a log write is under way: an interrupt waits for its end
+        self.interrupt_pending = False
+        self.shielded = False
+
+    def handle(self, signum: int, frame: Any) -> None:
+        name = signal.Signals(signum).name
+        if self.shielded:
+            print(f"\n{name}: saving the checkpoint and closing the log, please wait",
+                  file=sys.stderr)  # fmt: skip
+            return
+        if not self.stop_requested:
+            self.stop_requested, self.received = True, signum
+            print(f"\n{name}: stopping after this update (again: at once)", file=sys.stderr)
+            return
+        if self.in_log:
+            self.interrupt_pending = True
+            return
+        raise KeyboardInterrupt
+
+    def shield(self) -> None:
+        """From now on, signals do not interrupt."""
+        self.shielded = True
+
+    def after_log(self) -> None:
+        """End of a log write: raise the interrupt that waited for it, if any."""
+        self.in_log = False
+        if self.interrupt_pending and not self.shielded:
+            self.interrupt_pending = False
+            raise KeyboardInterrupt
+
+
+class _ShieldedLog:
+    """The recorder's per-step and per-update calls, never cut in the middle by a signal."""
+
+    def __init__(self, recorder: Any, signals: _Signals) -> None:
+        self.recorder, self.signals = recorder, signals
+
+    def record_step(self, *args: Any) -> None:
+        self.signals.in_log = True
+        self.recorder.record_step(*args)
+        self.signals.after_log()
+
+    def record_update(self, update: int, metrics: dict[str, Any]) -> None:
+        self.signals.in_log = True
+        self.recorder.record_update(update, metrics)
+        self.signals.after_log()
+
+
+def _worker_error(scenario: Scenario) -> type[Exception]:
+    """The exception of a dead physics worker (a class never raised in grid mode, so that
+    grid runs do not import the physics engine)."""
+    if scenario.mode != "physics":
+        return _NeverRaised
+    from .envs.workers import WorkerError
+
+    return WorkerError
+
+
+class _NeverRaised(Exception):
+    pass
+
+
 def open_recorder(trainer: Trainer) -> Any:
     """The run's MCAP recorder (``episodes.mcap``), or ``None`` if it cannot record.
 
@@ -321,23 +408,22 @@ def open_recorder(trainer: Trainer) -> Any:
         from .record.writer import EpisodeRecorder
     except ImportError:  # the record package is optional for training
         return None
-    # A resumed session continues the log in a file of its own (the first one was closed, or
-    # cut short by a crash), on the same clock and episode ids; the games caught mid-episode
-    # get a summary without a trajectory.
-    name = f"episodes-from-{trainer.update:06d}.mcap" if trainer.update else "episodes.mcap"
+    from .record.parts import new_part
+
+    # A resumed session continues the log in a file of its own (an earlier one may have been
+    # cut short by a crash, or got ahead of the checkpoint), on the same clock and episode
+    # ids; readers let each part supersede what earlier parts logged from its start on. The
+    # games caught mid-episode get a summary without a trajectory.
+    step = trainer.update * trainer.cfg.steps_per_env
+    part = {"update": trainer.update, "episode": trainer.stats.episodes, "step": step}
     recorder = EpisodeRecorder(
-        trainer.run_dir / name,
+        new_part(trainer.run_dir, trainer.update),
         trainer.scenario,
-        {"train": to_dict(trainer.cfg)},
+        {"train": to_dict(trainer.cfg), "part": part},
         log_every=trainer.log_every,
         scene_every=trainer.scene_every,
     )
-    recorder.start(
-        trainer.env,
-        trainer.obs,
-        step=trainer.update * trainer.cfg.steps_per_env,
-        episode=trainer.stats.episodes,
-    )
+    recorder.start(trainer.env, trainer.obs, step=step, episode=trainer.stats.episodes)
     return recorder
 
 
