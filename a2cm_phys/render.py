@@ -38,9 +38,12 @@ def render_rgb(
     velocities: np.ndarray | None = None,
     title: str | None = None,
     pixels: int = 320,
+    trail: np.ndarray | None = None,
 ) -> np.ndarray:
     """An ``(pixels, pixels, 3)`` uint8 picture: grid lines, walls, pursuer squares (with
-    velocity arrows in physics mode) and the evader disc, like the paper's figures 2–4."""
+    velocity arrows in physics mode) and the evader disc, like the paper's figures 2–4.
+    ``trail``, earlier positions ``(T, N + 1, 2)`` (oldest first), draws each agent's path
+    as a thin line in its colour (continuous control's paths)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle, Rectangle
@@ -59,6 +62,11 @@ def render_rgb(
     for k in range(1, size):
         ax.plot([k, k], [0, size], color="#dddddd", lw=0.8)
         ax.plot([0, size], [k, k], color="#dddddd", lw=0.8)
+    if trail is not None and len(trail):
+        path = np.concatenate((_centres(scenario, trail), centres[None]))  # (T + 1, N + 1, 2)
+        colours = [PURSUER_COLOURS[i % len(PURSUER_COLOURS)] for i in range(len(centres) - 1)]
+        for xy, colour in zip(path.transpose(1, 0, 2), [*colours, EVADER_COLOUR], strict=True):
+            ax.plot(xy[:, 0], xy[:, 1], color=colour, lw=1.2, alpha=0.6)
     side = phys.box_side
     for i, (x, y) in enumerate(centres[:-1]):
         colour = PURSUER_COLOURS[i % len(PURSUER_COLOURS)]

@@ -15,6 +15,7 @@ from a2cm_phys.envs.contacts import PURSUER_EVADER, PURSUER_PURSUER
 from a2cm_phys.envs.physics import PhysicsCore
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.envs.workers import ProcessCore
+from a2cm_phys.render import render_rgb
 
 CONT = [name for name in scenario_names() if name.startswith("phys_cont")]
 RIGHT, LEFT, UP, DOWN, STOP = (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0), (0.0, 0.0)
@@ -295,3 +296,16 @@ def test_pursuit_catches_the_random_evader(name):
         if len(episodes) >= 4:
             break
     assert len(episodes) >= 4 and all(e.captured for e in episodes)
+
+
+def test_frames_can_show_the_paths_taken():
+    sc = load_scenario("phys_cont")
+    core = PhysicsCore(sc, 1)
+    core.reset(np.array([0]), np.array([2], dtype=np.uint64))
+    trail = []
+    for _ in range(20):
+        trail.append(core.positions()[0])
+        core.step(pursuit_actions(sc, core.positions()))
+    plain = render_rgb(sc, core.positions()[0])
+    traced = render_rgb(sc, core.positions()[0], trail=np.array(trail))
+    assert plain.shape == traced.shape and (plain != traced).any(axis=-1).sum() > 100
