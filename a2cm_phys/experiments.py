@@ -69,14 +69,12 @@ class RunResult:
 def measure(outcome: Outcome, experiment: int, mode: str, eval_episodes: int) -> RunResult:
     """Read a finished run's log and evaluate its final greedy policy."""
     from .evaluate import load_trained, model_policy, play
-    from .plot import log_files
     from .record import read_run
 
     summary = outcome.summary or {}
     run_dir = Path(summary["run_dir"])
-    logs = [read_run(f) for f in log_files(run_dir)]
-    ends = np.concatenate([lg.episodes["t1"] for lg in logs])
-    lengths = np.concatenate([lg.episodes["length"] for lg in logs])
+    log = read_run(run_dir)  # every part, each episode once
+    ends, lengths = log.episodes["t1"], log.episodes["length"]
     last = ends >= 0.9 * ends.max() if len(ends) else np.zeros(0, dtype=bool)
     scenario, model = load_trained(run_dir)
     result = play(scenario, model_policy(model, greedy=True), eval_episodes, seed=10_000)

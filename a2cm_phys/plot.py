@@ -2,21 +2,22 @@
 
 Like the paper's figures 5–12: return per episode and steps per episode (each episode
 faint, a moving average bold), and collisions per episode; several runs overlaid (A2C
-against A2CM), each labelled from its log's metadata. A RUN_DIR's ``episodes*.mcap`` files
-(a resumed run writes ``episodes-from-NNNNNNN.mcap``) are read in order as one run; a
-file path is read alone. Writes ``returns.png``, ``lengths.png``, ``collisions.png`` and
+against A2CM), each labelled from its log's metadata. A RUN_DIR's log parts (a resumed run
+writes ``episodes-from-NNNNNN.mcap``) are read as one run, each episode once (see
+:mod:`a2cm_phys.record.parts`); a file path is read alone. A damaged or empty log is an
+error, not an empty figure. Writes ``returns.png``, ``lengths.png``, ``collisions.png`` and
 ``overview.png``.
 """
 
 from __future__ import annotations
 
-import argparse
-import sys
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from .cli import Parser, int_range, run_cli, writable_dir
 from .record.reader import LogError, read_run
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#17becf")
@@ -39,13 +40,13 @@ class Run:
 
 
 def log_files(path: Path) -> list[Path]:
-    """The log files of a run: ``path`` itself, or a folder's ``episodes*.mcap`` in order."""
+    """The log files of a run: ``path`` itself, or a run folder's parts in session order."""
+    from .record.parts import part_files
+
     if path.is_dir():
-        files = sorted(
-            path.glob("episodes*.mcap"), key=lambda p: (p.name != "episodes.mcap", p.name)
-        )
+        files = part_files(path)
         if not files:
-            raise LogError(f"{path}: no episodes*.mcap in this folder")
+            raise LogError(f"{path}: no episodes.mcap in this folder")
         return files
     if not path.exists():
         raise LogError(f"{path}: no such file or folder")
@@ -53,17 +54,22 @@ def log_files(path: Path) -> list[Path]:
 
 
 def load_run(path: Path) -> Run:
-    """Read every log of a run and concatenate the episodes in order."""
-    logs = [read_run(f) for f in log_files(path)]
-    columns = {
-        k: np.concatenate([lg.episodes[k] for lg in logs])
-        for k in ("return", "length", "collisions", "captured")
-    }
-    sc = logs[0].scenario
+    """Read a run (every part of a run folder's log, each episode once) or one log file.
+
+    A :class:`LogError` if the log is damaged or holds no finished episode: a figure of
+    nothing, or of a silently shortened run, would mislead.
+    """
+    if not path.exists():
+        raise LogError(f"{path}: no such file or folder")
+    log = read_run(path)
+    if log.damaged:
+        raise LogError(f"{path}: the log is damaged ({log.error}); see python -m a2cm_phys.replay")
+    if not log.n_episodes:
+        raise LogError(f"{path}: the log holds no finished episode")
+    columns = {k: log.episodes[k] for k in ("return", "length", "collisions", "captured")}
+    sc = log.scenario
     title = f"{sc.name} ({sc.mode}, collisions {sc.collisions.mode}, {sc.evader} evader)"
-    return Run(
-        label=logs[0].label, title=title, columns=columns, clean=all(lg.clean for lg in logs)
-    )
+    return Run(label=log.label, title=title, columns=columns, clean=log.clean)
 
 
 def moving_average(values: np.ndarray, window: int) -> np.ndarray:
@@ -143,11 +149,13 @@ def plot_runs(runs: list[Run], labels: list[str], out: Path, window: int) -> lis
     return written
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Plot the runs; return the exit code (2 on errors)."""
-    p = argparse.ArgumentParser(
-        prog="python -m a2cm_phys.plot", description="Learning curves (PNG) from run logs."
-    )
+    return run_cli(_main, argv)
+
+
+def _main(argv: Sequence[str]) -> int:
+    p = Parser(prog="python -m a2cm_phys.plot", description="Learning curves (PNG) from run logs.")
     p.add_argument(
         "runs", type=Path, nargs="+", metavar="RUN_DIR", help="run folders (or episodes.mcap files)"
     )
@@ -156,19 +164,15 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         help="output folder (default: the run's folder if one run, else ./plots)",
     )
-    p.add_argument("--window", type=int, default=100, help="moving-average window (episodes)")
+    p.add_argument(
+        "--window", type=int_range(1), default=100, help="moving-average window (episodes)"
+    )
     args = p.parse_args(argv)
-    try:
-        runs = [load_run(path) for path in args.runs]
-    except LogError as err:
-        print(f"plot: error: {err}", file=sys.stderr)
-        return 2
-    if args.window < 1:
-        print("plot: error: --window must be >= 1", file=sys.stderr)
-        return 2
     out = args.out or (
         args.runs[0] if len(args.runs) == 1 and args.runs[0].is_dir() else Path("plots")
     )
+    writable_dir(out, "--out")
+    runs = [load_run(path) for path in args.runs]
     for run, path in zip(runs, args.runs, strict=True):
         if not run.clean:
             print(f"note: {path}: a log was not closed cleanly; plotting what was recovered")

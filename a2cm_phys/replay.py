@@ -14,23 +14,25 @@ one message and exit 2.
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from .cli import Parser, UsageError, int_range, output_file, positive_float, run_cli
 from .config import Scenario
 from .envs.core import ACTION_NAMES
-from .envs.factory import make_core
-from .record.reader import LogError, RunLog, Trajectory, read_run
+from .record.reader import RunLog, Trajectory, read_run
+from .record.verify import verify, verify_trajectory
+
+__all__ = ["EXPORT_TOPIC", "describe", "export_foxglove", "main", "summary_table", "verify",
+           "verify_trajectory"]  # fmt: skip
 
 EXPORT_TOPIC = "/scene"
 """Topic of ``--export-foxglove`` files."""
 
 
-class ReplayError(Exception):
+class ReplayError(UsageError):
     """A request the log cannot satisfy (e.g. an episode it does not hold)."""
 
 
@@ -68,20 +70,31 @@ def summary_table(log: RunLog, parts: int = 10) -> str:
     return "\n".join(lines)
 
 
-def describe(log: RunLog) -> str:
-    """Header lines: file, state, scenario, algorithm, provenance."""
-    meta, sc = log.metadata, log.scenario
-    state = (
-        "closed cleanly"
-        if log.clean
-        else (
-            f"NOT closed cleanly (killed or still running): recovered {log.n_episodes} episodes "
-            f"from its complete chunks; reading stopped at {log.error or 'the end of the file'}"
+def _state(log: RunLog) -> str:
+    """How the log (or the run's parts) ended."""
+    if log.clean:
+        return "closed cleanly"
+    if log.damaged:
+        return (
+            f"DAMAGED (a record fails its checks: {log.error}); recovered {log.n_episodes} "
+            "episodes from the records before it"
         )
+    return (
+        f"NOT closed cleanly (killed or still running): recovered {log.n_episodes} episodes "
+        f"from its complete chunks; reading stopped at {log.error or 'the end of the file'}"
     )
+
+
+def describe(log: RunLog) -> str:
+    """Header lines: file(s), state, scenario, algorithm, provenance."""
+    meta, sc = log.metadata, log.scenario
+    where = log.path if len(log.parts) <= 1 else f"{log.path.parent}/"
+    lines = [f"{where}: {_state(log)}"]
+    if len(log.parts) > 1:
+        names = ", ".join(p.name for p in log.parts)
+        lines.append(f"{len(log.parts)} parts (one per session, read as one log): {names}")
     logged = len(log.logged_episodes)
-    lines = [
-        f"{log.path}: {state}",
+    lines += [
         f"{log.n_episodes} episodes ({logged} with trajectories), "
         f"{int(log.episodes['length'].sum())} env steps, {len(log.updates)} updates",
         f"scenario {sc.name}: {sc.mode}, {sc.size}x{sc.size}, {sc.pursuers} pursuers, "
@@ -180,115 +193,6 @@ def save_picture(frames: list[np.ndarray], path: Path, kind: str, fps: float) ->
     sheet.save(path)
 
 
-# --------------------------------------------------------------------------- verify
-
-
-def verify_trajectory(
-    scenario: Scenario, traj: Trajectory, core: object | None = None
-) -> str | None:
-    """Re-simulate ``traj`` from its seed and pursuer actions; ``None`` if it matches the
-    log exactly, else a description of the first divergence."""
-    core = core if core is not None else make_core(scenario, 1)
-    n, length = scenario.pursuers, traj.length
-    core.reset(np.array([0]), np.array([traj.seed], dtype=np.uint64))
-    sim = {
-        "positions": np.zeros_like(traj.positions),
-        "evader action": np.zeros(length, dtype=np.int64),
-        "reward": np.zeros(length),
-        "captured": np.zeros(length, dtype=bool),
-        "collisions": np.zeros(length, dtype=np.int64),
-        "wall contacts": np.zeros(length, dtype=np.int64),
-        "episode end": np.zeros(length, dtype=bool),
-    }
-    physics = traj.velocities is not None
-    if physics:
-        sim["velocities"] = np.zeros_like(traj.velocities)
-        sim["velocities"][0] = core.velocities()[0]
-    sim["positions"][0] = core.positions()[0]
-    sim_events: list[tuple] = []
-    actions = traj.actions[:, :n].astype(np.int64)
-    for k in range(length):
-        out = core.step(actions[k : k + 1])
-        sim["positions"][k + 1] = core.positions()[0]
-        if physics:
-            sim["velocities"][k + 1] = core.velocities()[0]
-        sim["evader action"][k] = out.evader_action[0]
-        sim["reward"][k] = out.reward[0]
-        sim["captured"][k] = out.captured[0]
-        sim["collisions"][k] = out.collisions[0]
-        sim["wall contacts"][k] = out.wall_contacts[0]
-        sim["episode end"][k] = out.terminated[0] or out.truncated[0]
-        if out.events is not None:
-            sim_events += [tuple(e) for e in out.events[0]]
-        if sim["episode end"][k] and k < length - 1:
-            break
-    end = np.zeros(length, dtype=bool)
-    end[-1] = True
-    logged = {
-        "positions": traj.positions,
-        "velocities": traj.velocities,
-        "evader action": traj.actions[:, n],
-        "reward": traj.reward,
-        "captured": traj.captured,
-        "collisions": traj.collisions,
-        "wall contacts": traj.wall_contacts,
-        "episode end": end,
-    }
-    first: tuple[int, str] | None = None
-    for name, sim_values in sim.items():
-        log_values = logged[name]
-        differs = (log_values != sim_values).reshape(len(log_values), -1).any(axis=1)
-        if differs.any():
-            k = int(np.argmax(differs))
-            state = name in ("positions", "velocities")  # row k is the state after k steps
-            step = k if state else k + 1
-            if first is None or step < first[0]:
-                first = (step, _divergence((name, step, log_values[k], sim_values[k])))
-    if first is not None:
-        return first[1]
-    logged_events = [tuple(e) for e in traj.events or ()]
-    if traj.events is not None and logged_events != sim_events:
-        i = next(
-            (i for i, (a, b) in enumerate(zip(logged_events, sim_events, strict=False)) if a != b),
-            min(len(logged_events), len(sim_events)),
-        )
-        return (
-            f"contact events differ from event {i}: logged "
-            f"{logged_events[i : i + 2]}, re-simulated {sim_events[i : i + 2]}"
-        )
-    return None
-
-
-def _divergence(check: tuple[str, int, object, object]) -> str:
-    name, k, logged, sim = check
-    fmt = lambda v: np.array2string(np.asarray(v), separator=",").replace("\n", "")  # noqa: E731
-    return f"{name} differ at step {k}: logged {fmt(logged)}, re-simulated {fmt(sim)}"
-
-
-def verify(log: RunLog, episodes: list[int] | None) -> int:
-    """Verify logged episodes; print a report; 0 if all match, 1 otherwise."""
-    scenario = log.scenario
-    core = make_core(scenario, 1)
-    trajs = log.trajectories() if episodes is None else (_trajectory(log, e) for e in episodes)
-    count = steps = 0
-    bad: list[str] = []
-    for traj in trajs:
-        problem = verify_trajectory(scenario, traj, core)
-        count, steps = count + 1, steps + traj.length
-        if problem:
-            bad.append(f"episode {traj.episode} (env {traj.env}, seed {traj.seed}): {problem}")
-    if not count:
-        print("verify: the log holds no trajectories to verify")
-        return 1
-    for line in bad[:20]:
-        print(f"DIVERGED {line}")
-    if len(bad) > 20:
-        print(f"… and {len(bad) - 20} more")
-    verdict = "all match" if not bad else f"{len(bad)} DIVERGED"
-    print(f"verify: {count} episodes ({steps} steps) re-simulated with {scenario.name}: {verdict}")
-    return 1 if bad else 0
-
-
 # --------------------------------------------------------------------------- export
 
 
@@ -329,46 +233,42 @@ def export_foxglove(log: RunLog, out: Path, episodes: list[int] | None) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog="python -m a2cm_phys.replay", description=__doc__.split("\n\n")[0].split(": ", 1)[-1]
     )
-    p.add_argument("file", type=Path, help="episodes.mcap, or a run folder holding one")
-    p.add_argument("--episode", type=int, nargs="+", metavar="N", help="episode id(s)")
+    p.add_argument("file", type=Path, help="a run folder (every part of its log), or one .mcap")
+    p.add_argument("--episode", type=int_range(0), nargs="+", metavar="N", help="episode id(s)")
     p.add_argument("--render", choices=("text", "gif", "png"), default="text")
     p.add_argument("--out", type=Path, help="output file of --render gif|png")
-    p.add_argument("--fps", type=float, default=4.0, help="gif frames per second")
-    p.add_argument("--max-frames", type=int, default=200, help="frames per gif/png at most")
+    p.add_argument("--fps", type=positive_float, default=4.0, help="gif frames per second")
+    p.add_argument(
+        "--max-frames", type=int_range(1, 10_000), default=200, help="frames per gif/png at most"
+    )
     p.add_argument("--verify", action="store_true", help="re-simulate and compare")
     p.add_argument("--export-foxglove", type=Path, metavar="OUT.mcap")
-    p.add_argument("--parts", type=int, default=10, help="rows of the summary table")
+    p.add_argument("--parts", type=int_range(1, 1000), default=10, help="rows of the summary table")
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run the command; return the exit code (2 on errors, 1 on a failed --verify)."""
+    return run_cli(_main, argv)
+
+
+def _main(argv: Sequence[str]) -> int:
     args = _parser().parse_args(argv)
-    try:
-        return _run(args)
-    except (LogError, ReplayError) as err:
-        print(f"replay: error: {err}", file=sys.stderr)
-        return 2
-    except BrokenPipeError:  # e.g. piped into head: stop quietly
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
-    except OSError as err:
-        print(f"replay: error: {err.filename or ''}: {err.strerror}", file=sys.stderr)
-        return 2
-
-
-def _run(args: argparse.Namespace) -> int:
+    if args.out is not None:
+        output_file(args.out, "--out")
+    if args.export_foxglove is not None:
+        output_file(args.export_foxglove, "--export-foxglove")
     log = read_run(args.file)
     if args.verify:
         if not log.clean:
-            print(
-                f"note: {log.path} was not closed cleanly; verifying the "
-                f"{len(log.logged_episodes)} recovered trajectories"
-            )
-        return verify(log, args.episode)
+            print(f"note: {_state(log)}; verifying the {len(log.logged_episodes)} recovered"
+                  " trajectories")  # fmt: skip
+        chosen = None if args.episode is None else [_trajectory(log, e) for e in args.episode]
+        status = verify(log, chosen)
+        return 1 if log.damaged else status
     if args.export_foxglove:
         n = export_foxglove(log, args.export_foxglove, args.episode)
         print(
@@ -393,7 +293,7 @@ def _run(args: argparse.Namespace) -> int:
     print(describe(log))
     print()
     print(summary_table(log, args.parts))
-    return 0
+    return 1 if log.damaged else 0
 
 
 if __name__ == "__main__":

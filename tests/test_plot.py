@@ -9,7 +9,8 @@ import pytest
 from PIL import Image
 from test_record import make_log
 
-from a2cm_phys.plot import load_run, main, moving_average
+from a2cm_phys.plot import load_run, log_files, main, moving_average
+from a2cm_phys.record.parts import new_part
 
 
 def test_plot_writes_png_figures_for_overlaid_runs(
@@ -39,14 +40,45 @@ def test_plot_writes_png_figures_for_overlaid_runs(
     assert "wrote" in capsys.readouterr().out
 
 
-def test_a_resumed_run_reads_its_logs_in_order(tmp_path: Path) -> None:
-    make_log(tmp_path / "episodes.mcap", steps=60, seed=1)
-    make_log(tmp_path / "episodes-from-0000010.mcap", steps=60, seed=2)
-    run = load_run(tmp_path)
-    first = load_run(tmp_path / "episodes.mcap")
-    n = len(first.columns["length"])
-    assert len(run.columns["length"]) > n
-    np.testing.assert_array_equal(run.columns["length"][:n], first.columns["length"])
+def test_a_runs_log_parts_are_read_in_session_order(tmp_path: Path) -> None:
+    names = ["episodes-from-000010-2.mcap", "episodes-from-000003.mcap", "episodes.mcap",
+             "episodes-from-000010.mcap", "episodes-other.mcap"]  # fmt: skip
+    for name in names:
+        (tmp_path / name).touch()
+    assert [p.name for p in log_files(tmp_path)] == [
+        "episodes.mcap",
+        "episodes-from-000003.mcap",
+        "episodes-from-000010.mcap",
+        "episodes-from-000010-2.mcap",
+    ]
+    assert new_part(tmp_path, 10).name == "episodes-from-000010-3.mcap"
+    assert new_part(tmp_path / "new", 0).name == "episodes.mcap"
+
+
+def test_an_empty_or_damaged_log_is_an_error_not_an_empty_figure(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    make_log(tmp_path / "empty" / "episodes.mcap", steps=1)  # no episode ends in one step
+    assert main([str(tmp_path / "empty"), "--out", str(tmp_path / "figs")]) == 2
+    assert "no finished episode" in capsys.readouterr().err
+    path = tmp_path / "damaged" / "episodes.mcap"
+    make_log(path, steps=400, chunk_bytes=2000)
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+    assert main([str(path.parent), "--out", str(tmp_path / "figs")]) == 2
+    assert "damaged" in capsys.readouterr().err
+    assert not (tmp_path / "figs").exists() or not any((tmp_path / "figs").iterdir())
+
+
+def test_out_pointing_at_a_file_is_an_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    make_log(tmp_path / "run" / "episodes.mcap", steps=60)
+    (tmp_path / "file.png").write_text("not a folder")
+    assert main([str(tmp_path / "run"), "--out", str(tmp_path / "file.png")]) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and "is a file" in err and err.count("\n") == 1
 
 
 def test_moving_average() -> None:
@@ -57,4 +89,4 @@ def test_moving_average() -> None:
 
 def test_missing_run_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main([str(tmp_path / "nope")]) == 2
-    assert "plot: error:" in capsys.readouterr().err
+    assert "error:" in capsys.readouterr().err

@@ -16,7 +16,7 @@ from PIL import Image
 from test_record import FOXGLOVE_SCENE, make_log, validator
 
 from a2cm_phys.record import read_run
-from a2cm_phys.record.schemas import TRAJECTORY_TOPIC
+from a2cm_phys.record.schemas import SUMMARY_TOPIC, TRAJECTORY_TOPIC
 from a2cm_phys.replay import EXPORT_TOPIC, main
 
 
@@ -27,8 +27,10 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def rewrite(src: Path, dst: Path, edit: Callable[[dict], None]) -> None:
-    """Copy an MCAP file through the mcap library, editing the first trajectory block."""
+def rewrite(
+    src: Path, dst: Path, edit: Callable[[dict], None], topic: str = TRAJECTORY_TOPIC
+) -> None:
+    """Copy an MCAP file through the mcap library, editing the first message of ``topic``."""
     with open(src, "rb") as fh:
         reader = make_reader(fh)
         metadata = list(reader.iter_metadata())
@@ -52,7 +54,7 @@ def rewrite(src: Path, dst: Path, edit: Callable[[dict], None]) -> None:
                     channel.topic, channel.message_encoding, schemas[schema.id]
                 )
             data = message.data
-            if channel.topic == TRAJECTORY_TOPIC and not edited:
+            if channel.topic == topic and not edited:
                 doc = json.loads(data)
                 edit(doc)
                 data, edited = json.dumps(doc).encode(), True
@@ -141,6 +143,50 @@ def test_verify_catches_tampered_actions(
     out = capsys.readouterr().out
     assert "DIVERGED episode 0 " in out and f"{what} differ at step 1" in out
     assert "1 DIVERGED" in out
+
+
+@pytest.mark.parametrize(
+    ("key", "change"),
+    [("return", lambda v: v - 1), ("length", lambda v: v + 1), ("captured", lambda v: not v)],
+)
+def test_verify_checks_the_episode_summaries(
+    run_dir: Path, tmp_path: Path, key: str, change: Callable, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def edit(doc: dict) -> None:
+        doc[key][0] = change(doc[key][0])
+
+    bad = tmp_path / "tampered.mcap"
+    rewrite(run_dir / "episodes.mcap", bad, edit, topic=SUMMARY_TOPIC)
+    assert main([str(bad), "--verify"]) == 1
+    out = capsys.readouterr().out
+    assert "DIVERGED episode 0 " in out and f"summary {key} is" in out and "1 DIVERGED" in out
+
+
+def test_a_damaged_chunk_is_reported_as_damage_not_as_a_crash(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "episodes.mcap"
+    make_log(path, steps=400, chunk_bytes=2000)
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF  # inside a chunk of a cleanly closed file
+    path.write_bytes(bytes(data))
+    assert main([str(path)]) == 1
+    out = capsys.readouterr().out
+    assert "DAMAGED" in out and "NOT closed cleanly" not in out
+    assert main([str(path), "--verify"]) == 1
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["--max-frames", "0"], ["--max-frames", "-3"], ["--fps", "0"], ["--fps", "-1"],
+     ["--fps", "nan"], ["--parts", "0"], ["--episode", "-1"]],
+)  # fmt: skip
+def test_bad_frame_options_exit_2(
+    run_dir: Path, args: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main([str(run_dir), "--episode", "0", "--render", "gif", *args]) == 2
+    err = capsys.readouterr().err
+    assert args[0] in err and err.count("\n") == 1
 
 
 def test_export_foxglove(run_dir: Path, tmp_path: Path) -> None:

@@ -92,7 +92,14 @@ def test_interrupt_mid_rollout_rewinds_to_last_update(
     _assert_same_run(full, part)
 
 
-def test_sigint_saves_checkpoint_and_exits_130(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("signum", "status"), [(signal.SIGINT, EXIT_INTERRUPTED), (signal.SIGTERM, 128 + 15)]
+)
+def test_sigint_or_sigterm_saves_checkpoint_closes_log_and_exits(
+    tmp_path: Path, signum: int, status: int
+) -> None:
+    from a2cm_phys.record import read_run
+
     cmd = [sys.executable, "-m", "a2cm_phys.train", *GRID, "--updates", "1000000"]
     cmd += ["--logdir", str(tmp_path), "--no-progress", "--checkpoint-every", "20"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -103,17 +110,18 @@ def test_sigint_saves_checkpoint_and_exits_130(tmp_path: Path) -> None:
             if ckpts and checkpoint.load(ckpts[0])["update"] >= 20:
                 break
             time.sleep(0.1)
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signum)
         _, err = proc.communicate(timeout=60)
     finally:
         proc.kill()
-    assert proc.returncode == EXIT_INTERRUPTED, err
+    assert proc.returncode == status, err
     assert "Traceback" not in err and "--resume" in err
     (run_dir,) = tmp_path.iterdir()
     state = checkpoint.load(run_dir)
     assert state["update"] >= 20
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["status"] == "interrupted" and summary["updates"] == state["update"]
+    assert read_run(run_dir).clean
 
 
 def test_nonfinite_loss_stops_and_keeps_last_good_checkpoint(
