@@ -22,7 +22,8 @@ import numpy as np
 
 from . import checkpoint
 from .algos import ActorCritic, make_model
-from .config import ConfigError, Scenario, build, load_scenario, load_train
+from .cli import SEED, Parser, add_scenario_options, int_range, run_cli, scenario_from_args
+from .config import ConfigError, Scenario, build, load_train
 from .envs.vector import VectorEnv
 from .rollout import Policy
 from .stats import describe
@@ -134,24 +135,26 @@ def format_report(report: dict[str, Any], title: str) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m a2cm_phys.evaluate`` argument parser."""
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog="python -m a2cm_phys.evaluate",
         description="Play a trained policy (or a baseline) and report capture statistics.",
     )
     p.add_argument("run", nargs="?", help="run directory or checkpoint file")
-    p.add_argument("--episodes", type=int, default=1000)
+    p.add_argument("--episodes", type=int_range(1, 100_000_000), default=1000)
     p.add_argument("--greedy", action="store_true", help="most probable action, no sampling")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--num-envs", type=int, default=16, help="games played at once")
+    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument("--num-envs", type=int_range(1, 65_536), default=16, help="games at once")
     p.add_argument("--policy", choices=["trained", "random", "oracle"], default="trained")
-    p.add_argument("--scenario", help="scenario for --policy random/oracle without a run")
+    add_scenario_options(
+        p, train=False, scenario_help="scenario for --policy random/oracle without a run"
+    )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     return p
 
 
 def _setup(args: argparse.Namespace) -> tuple[Scenario, Policy, str]:
-    if args.episodes < 1 or args.num_envs < 1 or args.seed < 0:
-        raise ConfigError("--episodes and --num-envs must be >= 1, --seed >= 0")
+    if args.set and not args.scenario:
+        raise ConfigError("--set: needs --scenario (a trained run's scenario is fixed)")
     if args.policy == "trained" or (args.run and not args.scenario):
         if not args.run:
             raise ConfigError("give a run directory or checkpoint (or --policy random/oracle)")
@@ -160,7 +163,7 @@ def _setup(args: argparse.Namespace) -> tuple[Scenario, Policy, str]:
         except (OSError, ValueError) as err:
             raise ConfigError(str(err)) from None
     elif args.scenario:
-        scenario, model = load_scenario(args.scenario), None
+        scenario, model = scenario_from_args(args, train=False), None
     else:
         raise ConfigError("--policy random/oracle needs --scenario or a run directory")
     if args.policy == "trained":
@@ -178,12 +181,12 @@ def _setup(args: argparse.Namespace) -> tuple[Scenario, Policy, str]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m a2cm_phys.evaluate``; returns the exit status."""
+    return run_cli(_main, argv)
+
+
+def _main(argv: Sequence[str]) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        scenario, policy, label = _setup(args)
-    except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    scenario, policy, label = _setup(args)
     result = play(scenario, policy, args.episodes, args.num_envs, args.seed)
     report = {"scenario": scenario.name, "policy": label, **result.report(args.seed)}
     if args.json:
