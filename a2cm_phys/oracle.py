@@ -16,7 +16,6 @@ can put learned policies next to it.
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import os
@@ -31,7 +30,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import ConfigError, Scenario, load_scenario, parse_assignments
+from .cli import (
+    Parser,
+    UsageError,
+    add_scenario_options,
+    run_cli,
+    scenario_from_args,
+    writable_dir,
+)
+from .config import Scenario, load_scenario
 from .envs.core import default_start
 from .solve import (
     GridModel,
@@ -316,24 +323,25 @@ def _report(sol: OracleSolution) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Solve (or load) a grid scenario's optimum and print its statistics; exit code."""
-    parser = argparse.ArgumentParser(
+    return run_cli(_main, argv)
+
+
+def _main(argv: Sequence[str]) -> int:
+    parser = Parser(
         prog="python -m a2cm_phys.oracle",
         description="Exact optimal pursuit policy of a grid scenario (value iteration).",
     )
-    parser.add_argument("--scenario", default="grid", help="scenario name or TOML path")
-    parser.add_argument(
-        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-        help="override a scenario key (repeatable), e.g. --set evader=flee",
-    )  # fmt: skip
+    add_scenario_options(parser, default="grid", train=False)
     parser.add_argument("--cache-dir", type=Path, default=None, help="cache directory")
     parser.add_argument("--no-cache", action="store_true", help="neither read nor write cache")
     args = parser.parse_args(argv)
+    scenario = scenario_from_args(args, train=False)
+    if args.cache_dir is not None and not args.no_cache:
+        writable_dir(args.cache_dir, "--cache-dir")
     try:
-        scenario = load_scenario(args.scenario, parse_assignments(args.overrides))
         sol = load_or_solve(scenario, args.cache_dir, use_cache=not args.no_cache)
-    except (ConfigError, TooLargeError, UnsupportedError) as err:
-        print(f"oracle: {err}", file=sys.stderr)
-        return 2
+    except (TooLargeError, UnsupportedError) as err:
+        raise UsageError(str(err)) from None
     print(_report(sol))
     return 0
 
