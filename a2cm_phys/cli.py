@@ -173,10 +173,13 @@ def add_scenario_options(
     *,
     default: str | None = None,
     train: bool = True,
+    scenario: bool = True,
     scenario_help: str = "scenario name (see a2cm_phys/scenarios/) or path to a TOML file",
 ) -> None:
-    """Add ``--scenario``, ``--set KEY=VALUE`` and (with ``train``) ``--preset NAME``."""
-    parser.add_argument("--scenario", default=default, help=scenario_help)
+    """Add ``--scenario`` (unless not ``scenario``), ``--set KEY=VALUE`` and (with
+    ``train``) ``--preset NAME``."""
+    if scenario:
+        parser.add_argument("--scenario", default=default, help=scenario_help)
     what = "scenario key, or train.KEY for a training option" if train else "scenario key"
     parser.add_argument(
         "--set",
@@ -214,13 +217,18 @@ def scenario_from_args(args: argparse.Namespace, *, train: bool = True) -> Scena
     return load_scenario(args.scenario, overrides)
 
 
-def train_from_args(args: argparse.Namespace, flags: dict[str, Any]) -> Train:
-    """The training options: the ``--preset``, then ``--set train.KEY=…``, then ``flags``
-    (the command's explicit options, ``None`` meaning not given)."""
+def train_values(args: argparse.Namespace, flags: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The training options given: the ``--preset``, then ``--set train.KEY=…``, then
+    ``flags`` (the command's explicit options, ``None`` meaning not given)."""
     values = preset_values(args.preset) if getattr(args, "preset", None) else {}
     values.update(split_assignments(args.set)[1])
-    values.update({k: v for k, v in flags.items() if v is not None})
-    cfg = load_train(values)
+    values.update({k: v for k, v in (flags or {}).items() if v is not None})
+    return values
+
+
+def train_from_args(args: argparse.Namespace, flags: dict[str, Any] | None = None) -> Train:
+    """The validated :class:`Train` of :func:`train_values`, its device checked."""
+    cfg = load_train(train_values(args, flags))
     check_device(cfg.device, "--device")
     return cfg
 

@@ -27,6 +27,17 @@ from typing import Any
 
 import numpy as np
 
+from .cli import (
+    Parser,
+    add_logdir,
+    add_scenario_options,
+    check_device,
+    int_range,
+    run_cli,
+    split_assignments,
+    train_values,
+    writable_dir,
+)
 from .config import ConfigError, load_train
 from .stats import t_interval
 from .sweep import Outcome, RunSpec, run_all
@@ -215,64 +226,55 @@ def figures(outcomes: list[Outcome], modes: list[str], out: Path) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m a2cm_phys.experiments`` argument parser."""
-    p = argparse.ArgumentParser(
-        prog="python -m a2cm_phys.experiments", description=__doc__.split("\n")[0]
-    )
+    p = Parser(prog="python -m a2cm_phys.experiments", description=__doc__.split("\n")[0])
     p.add_argument("--seeds", default="0-4")
     p.add_argument("--physics-seeds", help="seeds of the physics runs (default: --seeds)")
     p.add_argument("--modes", default="grid,physics")
-    p.add_argument("--updates", type=int, default=5000, help="per run (the paper: 5,000)")
-    p.add_argument("--num-envs", type=int, default=16)
-    p.add_argument("--eval-episodes", type=int, default=2000)
-    p.add_argument("--sweep-dir", default="logs/experiments")
+    p.add_argument("--updates", type=int_range(1), default=5000, help="per run (the paper: 5,000)")
+    p.add_argument("--num-envs", type=int_range(1), default=16)
+    p.add_argument("--eval-episodes", type=int_range(1, 10_000_000), default=2000)
+    add_logdir(p, "logs/experiments", "where the runs go (--sweep-dir: the old spelling)")
     p.add_argument("--out", default="docs", help="where RESULTS.md and figures/ go")
     p.add_argument("--address", help="Ray cluster address")
     p.add_argument("--sequential", action="store_true", help="no Ray")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="train.KEY=VALUE options for every run (e.g. train.reward_scale=1e-3)",
-    )
+    add_scenario_options(p, scenario=False)  # --set train.KEY=VALUE, --preset
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m a2cm_phys.experiments``; returns the exit status."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    return run_cli(_main, argv)
+
+
+def _main(argv: Sequence[str]) -> int:
     args = build_parser().parse_args(argv)
-    from .config import parse_assignments
-    from .sweep import parse_seeds
+    from .sweep import check_reusable, parse_seeds
 
     start = time.perf_counter()
-    try:
-        seeds = parse_seeds(args.seeds)
-        mode_seeds = {"grid": seeds, "physics": parse_seeds(args.physics_seeds or args.seeds)}
-        modes = [m.strip() for m in args.modes.split(",") if m.strip()]
-        bad = [m for m in modes if m not in ("grid", "physics")]
-        if bad:
-            raise ConfigError(f"--modes: unknown mode {bad[0]!r} (grid, physics)")
-        extra = parse_assignments(args.set)
-        if any(not k.startswith("train.") for k in extra):
-            raise ConfigError("--set: only train.KEY=VALUE options (the scenarios are fixed)")
-        extra = {k[6:]: v for k, v in extra.items()}
-        batch_size = load_train(
-            {"updates": args.updates, "num_envs": args.num_envs, **extra}
-        ).batch_size
-    except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    train = {"updates": args.updates, "num_envs": args.num_envs, **extra}
+    seeds = parse_seeds(args.seeds)
+    mode_seeds = {"grid": seeds, "physics": parse_seeds(args.physics_seeds or args.seeds)}
+    modes = [m.strip() for m in args.modes.split(",") if m.strip()]
+    bad = [m for m in modes if m not in ("grid", "physics")]
+    if bad or not modes:
+        raise ConfigError(f"--modes: unknown mode {(bad or [args.modes])[0]!r} (grid, physics)")
+    if split_assignments(args.set)[0]:
+        raise ConfigError("--set: only train.KEY=VALUE options (the scenarios are fixed)")
+    extra = train_values(args, {"updates": args.updates, "num_envs": args.num_envs})
+    cfg = load_train(extra)
+    check_device(cfg.device)
+    batch_size = cfg.batch_size
+    sweep_dir = writable_dir(args.logdir, "--logdir")
+    writable_dir(args.out, "--out")
+    train = extra
     specs, where = [], {}
     for exp, (_, scenarios) in EXPERIMENTS.items():
         for mode in modes:
             for algo in ALGOS:
                 for seed in mode_seeds[mode]:
                     spec = RunSpec(scenarios[mode], algo, seed, train)
+                    check_reusable(spec, sweep_dir)
                     specs.append(spec)
                     where[spec.name] = (exp, mode)
-    sweep_dir = Path(args.sweep_dir)
     sweep_dir.mkdir(parents=True, exist_ok=True)
 
     def done(o: Outcome) -> None:

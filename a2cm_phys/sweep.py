@@ -3,10 +3,13 @@
     python -m a2cm_phys.sweep --scenarios grid,grid_collision --algos a2c,a2cm --seeds 0-4
 
 Each run is exactly ``python -m a2cm_phys.train`` with that scenario, algorithm and seed,
-written to its own run directory ``<sweep-dir>/<scenario>-<algo>-s<seed>/`` (config,
+written to its own run directory ``<logdir>/<scenario>-<algo>-s<seed>/`` (config,
 checkpoint, MCAP log, summary), so a sweep's numbers equal those of the runs done one by
 one. Re-running a sweep skips finished runs and resumes unfinished ones from their
-checkpoints; a failing run is retried once and reported while the others go on.
+checkpoints, but only runs whose resolved scenario and training config are exactly the
+requested ones: a run directory holding another configuration is an error naming the
+difference, found before anything runs. A failing run is retried once and reported while
+the others go on.
 Without ``--address`` Ray starts locally on this machine's cores; ``--address auto`` or
 ``ray://host:10001`` uses an existing cluster. Without Ray installed (``pip install -e
 ".[cluster]"``) the runs go one after another in this process.
@@ -20,13 +23,26 @@ import json
 import shlex
 import sys
 import traceback
+from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from . import checkpoint
-from .config import ConfigError, load_scenario, load_train, parse_assignments
+from .cli import (
+    Parser,
+    add_logdir,
+    add_scenario_options,
+    check_device,
+    int_range,
+    positive_float,
+    run_cli,
+    split_assignments,
+    train_values,
+    writable_dir,
+)
+from .config import ConfigError, Scenario, Train, load_scenario, load_train, to_dict
 from .stats import t_interval
 
 
@@ -46,6 +62,11 @@ class RunSpec:
     def name(self) -> str:
         """The run directory's name."""
         return f"{Path(self.scenario).stem}-{self.algo}-s{self.seed}"
+
+    def resolve(self) -> tuple[Scenario, Train]:
+        """The validated scenario and training config of this run."""
+        scenario = load_scenario(self.scenario, self.overrides)
+        return scenario, load_train({**self.train, "algo": self.algo, "seed": self.seed})
 
     def command(self, run_dir: Path) -> str:
         """The equivalent ``train`` command line (for the record)."""
@@ -79,11 +100,62 @@ def run_state(run_dir: Path) -> str:
     return "partial" if (run_dir / checkpoint.CHECKPOINT_NAME).exists() else "new"
 
 
+def _plain(obj: Any) -> Any:
+    return json.loads(json.dumps(to_dict(obj)))
+
+
+def stored_config(run_dir: Path) -> dict[str, Any] | None:
+    """The resolved ``scenario`` and ``train`` config a run directory holds (its
+    ``config.json``, else its checkpoint), or ``None`` if it holds no run."""
+    path = run_dir / "config.json"
+    if path.exists():
+        try:
+            config = json.loads(path.read_text())
+            return {"scenario": config["scenario"], "train": config["train"]}
+        except (OSError, ValueError, KeyError):
+            raise ConfigError(f"{path}: unreadable; cannot tell which run this is") from None
+    if (run_dir / checkpoint.CHECKPOINT_NAME).exists():
+        try:
+            state = checkpoint.load(run_dir)
+        except (OSError, ValueError) as err:
+            raise ConfigError(str(err)) from None
+        return {"scenario": state["scenario"], "train": state["train"]}
+    return None
+
+
+def differences(stored: Any, wanted: Any, prefix: str = "") -> list[str]:
+    """``key: stored vs wanted`` for every leaf that differs between two nested dicts."""
+    if isinstance(stored, dict) and isinstance(wanted, dict):
+        out = []
+        for key in sorted(set(stored) | set(wanted)):
+            out += differences(stored.get(key), wanted.get(key), f"{prefix}{key}.")
+        return out
+    return [] if stored == wanted else [f"{prefix[:-1]}: {stored!r} there, {wanted!r} now"]
+
+
+def check_reusable(spec: RunSpec, sweep_dir: Path) -> None:
+    """A :class:`ConfigError` if ``spec``'s run directory holds a run of another resolved
+    configuration (it would be reported as this run's result)."""
+    run_dir = sweep_dir / spec.name
+    stored = stored_config(run_dir)
+    if stored is None:
+        return
+    scenario, cfg = spec.resolve()
+    diff = differences(stored, {"scenario": _plain(scenario), "train": _plain(cfg)})
+    if diff:
+        shown = "; ".join(diff[:3]) + (f"; and {len(diff) - 3} more" if len(diff) > 3 else "")
+        raise ConfigError(
+            f"{run_dir}: holds a run of another configuration ({shown}); use another --logdir,"
+            " or move that run away"
+        )
+
+
 def execute(spec: RunSpec, sweep_dir: str) -> dict[str, Any]:
     """Run (or resume, or skip) one run; returns its summary. Runs inside a Ray task."""
     from .train import Trainer, write_config
 
     run_dir = Path(sweep_dir) / spec.name
+    check_reusable(spec, Path(sweep_dir))
     state = run_state(run_dir)
     if state == "done":
         return {**json.loads((run_dir / "summary.json").read_text()), "sweep": "skipped"}
@@ -91,8 +163,7 @@ def execute(spec: RunSpec, sweep_dir: str) -> dict[str, Any]:
     if state == "partial":
         trainer = Trainer.resume(run_dir, **options)
     else:
-        scenario = load_scenario(spec.scenario, spec.overrides)
-        cfg = load_train({**spec.train, "algo": spec.algo, "seed": spec.seed})
+        scenario, cfg = spec.resolve()
         run_dir.mkdir(parents=True, exist_ok=True)
         write_config(run_dir, scenario, cfg, spec.command(run_dir))
         trainer = Trainer(scenario, cfg, run_dir, **options)
@@ -251,74 +322,100 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+_MAX_SEEDS = 10_000
+
+
 def parse_seeds(text: str) -> list[int]:
-    """``0-4`` → 0..4; ``1,3,7`` → those; both may mix (``0-2,9``)."""
+    """``0-4`` → 0..4; ``1,3,7`` → those; both may mix (``0-2,9``); a seed given twice, a
+    negative one or one beyond 64 bits is a :class:`ConfigError`."""
+    from .cli import MAX_SEED
+
     seeds: list[int] = []
-    try:
-        for part in text.split(","):
-            lo, _, hi = part.strip().partition("-")
-            seeds += range(int(lo), int(hi) + 1) if hi else [int(lo)]
-    except ValueError:
-        raise ConfigError(f"--seeds: '{text}' is not like 0-4 or 1,3,7") from None
+    for part in text.split(","):
+        lo, _, hi = part.strip().partition("-")
+        try:
+            first, last = int(lo), int(hi or lo)
+        except ValueError:
+            raise ConfigError(f"--seeds: '{text}' is not like 0-4 or 1,3,7") from None
+        if last - first >= _MAX_SEEDS or len(seeds) >= _MAX_SEEDS:
+            raise ConfigError(f"--seeds: '{text}': too many seeds (at most {_MAX_SEEDS:,})")
+        seeds += range(first, last + 1)
     if not seeds:
-        raise ConfigError("--seeds: no seed given")
+        raise ConfigError(f"--seeds: '{text}' gives no seed")
+    repeated = sorted(s for s, n in Counter(seeds).items() if n > 1)
+    if repeated:
+        raise ConfigError(f"--seeds: seed {repeated[0]} is given twice in '{text}'")
+    if max(seeds) > MAX_SEED:
+        raise ConfigError(f"--seeds: {max(seeds)} is beyond 64 bits")
     return seeds
+
+
+def _names(text: str, option: str) -> list[str]:
+    names = [x.strip() for x in text.split(",") if x.strip()]
+    if not names:
+        raise ConfigError(f"{option}: '{text}' names nothing")
+    repeated = sorted({x for x in names if names.count(x) > 1})
+    if repeated:
+        raise ConfigError(f"{option}: '{repeated[0]}' is given twice")
+    return names
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m a2cm_phys.sweep`` argument parser."""
-    p = argparse.ArgumentParser(
-        prog="python -m a2cm_phys.sweep", description=__doc__.split("\n")[0]
-    )
+    p = Parser(prog="python -m a2cm_phys.sweep", description=__doc__.split("\n")[0])
     p.add_argument("--scenarios", required=True, help="comma-separated scenario names or paths")
     p.add_argument("--algos", default="a2c,a2cm", help="comma-separated: a2c, a2cm")
     p.add_argument("--seeds", default="0-4", help="e.g. 0-4 or 1,3,7")
-    p.add_argument("--sweep-dir", default="logs/sweep", help="where the run directories go")
+    add_logdir(p, "logs/sweep", "where the run directories go (--sweep-dir: the old spelling)")
     p.add_argument("--address", help="Ray cluster address (auto, ray://host:10001)")
-    p.add_argument("--cpus-per-run", type=float, default=1.0)
+    p.add_argument("--cpus-per-run", type=positive_float, default=1.0)
     p.add_argument("--sequential", action="store_true", help="no Ray, even if installed")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="scenario override, or train.KEY=VALUE (e.g. train.updates=500)",
-    )
+    add_scenario_options(p, scenario=False)
     p.add_argument("--no-record", action="store_true", help="no MCAP episode logs")
-    p.add_argument("--log-every", type=int, default=1)
+    p.add_argument("--log-every", type=int_range(0), default=1)
     return p
 
 
 def plan(args: argparse.Namespace) -> list[RunSpec]:
-    """The runs of a sweep, validated before anything starts."""
-    assignments = parse_assignments(args.set)
-    train = {k[6:]: v for k, v in assignments.items() if k.startswith("train.")}
-    overrides = {k: v for k, v in assignments.items() if not k.startswith("train.")}
-    scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
-    algos = [a.strip() for a in args.algos.split(",") if a.strip()]
-    specs = []
+    """The runs of a sweep, validated (also against the run directories already in
+    ``--logdir``) before anything starts."""
+    overrides, _ = split_assignments(args.set)
+    train = train_values(args)
+    scenarios = _names(args.scenarios, "--scenarios")
+    algos = _names(args.algos, "--algos")
+    seeds = parse_seeds(args.seeds)
+    specs, names = [], {}
     for scenario in scenarios:
         load_scenario(scenario, overrides)
         for algo in algos:
-            for seed in parse_seeds(args.seeds):
-                load_train({**train, "algo": algo, "seed": seed})
-                specs.append(
-                    RunSpec(
-                        scenario, algo, seed, train, overrides, not args.no_record, args.log_every
-                    )
+            for seed in seeds:
+                spec = RunSpec(
+                    scenario, algo, seed, train, overrides, not args.no_record, args.log_every
                 )
+                _, cfg = spec.resolve()
+                if spec.name in names:
+                    raise ConfigError(
+                        f"--scenarios: '{names[spec.name]}' and '{scenario}' would share the run"
+                        f" directory {spec.name}"
+                    )
+                names[spec.name] = scenario
+                specs.append(spec)
+    check_device(cfg.device)
+    sweep_dir = writable_dir(args.logdir, "--logdir")
+    for spec in specs:
+        check_reusable(spec, sweep_dir)
     return specs
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m a2cm_phys.sweep``; returns the exit status."""
+    return run_cli(_main, argv)
+
+
+def _main(argv: Sequence[str]) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        specs = plan(args)
-    except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    sweep_dir = Path(args.sweep_dir)
+    specs = plan(args)
+    sweep_dir = Path(args.logdir)
     sweep_dir.mkdir(parents=True, exist_ok=True)
     from tqdm import tqdm
 

@@ -141,3 +141,54 @@ def test_ray_sweep_equals_sequential_retries_failures_and_skips(tmp_path, local_
         assert same(by_name[ref.spec.name].summary, ref.summary)
     again = sweep.run_on_ray(plan[:-1], tmp_path / "ray", lambda o: None, None, 1.0)
     assert {o.summary["sweep"] for o in again} == {"skipped"}
+
+
+def _sweep(tmp_path, *extra):
+    args = ["--scenarios", "grid", "--algos", "a2cm", "--seeds", "0", "--sequential",
+            "--logdir", str(tmp_path / "sweep"), "--no-record"]  # fmt: skip
+    args += [f"--set=train.{k}={v}" for k, v in TINY.items()]
+    return sweep.main([*args, *extra])
+
+
+def test_a_run_of_other_settings_is_not_reused(tmp_path, capsys):
+    assert _sweep(tmp_path) == 0
+    capsys.readouterr()
+    assert _sweep(tmp_path, "--set", "train.updates=10", "--set", "rewards.step=-7") == 2
+    err = capsys.readouterr().err
+    assert "another configuration" in err and "train.updates: 4 there, 10 now" in err
+    assert "scenario.rewards.step: -1.0 there, -7.0 now" in err and err.count("\n") == 1
+    assert _sweep(tmp_path) == 0  # the same settings: reused
+    assert "grid-a2cm-s0: skipped" in "".join(capsys.readouterr())
+
+
+def test_a_different_scenario_file_with_the_same_stem_is_not_reused(tmp_path, capsys):
+    assert _sweep(tmp_path) == 0
+    other = tmp_path / "other" / "grid.toml"
+    other.parent.mkdir()
+    other.write_text('mode = "grid"\nsize = 4\n')
+    capsys.readouterr()
+    args = ["--scenarios", str(other), "--algos", "a2cm", "--seeds", "0", "--sequential",
+            "--logdir", str(tmp_path / "sweep"), "--no-record"]  # fmt: skip
+    args += [f"--set=train.{k}={v}" for k, v in TINY.items()]
+    assert sweep.main(args) == 2
+    assert "scenario.size: 5 there, 4 now" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("seeds", "message"),
+    [("0,0,1", "seed 0 is given twice"), ("0-2,1", "seed 1 is given twice"),
+     ("0-99999999999", "too many seeds"), ("18446744073709551616", "beyond 64 bits")],
+)  # fmt: skip
+def test_bad_or_duplicate_seeds_exit_2(tmp_path, capsys, seeds, message):
+    assert sweep.main(["--scenarios", "grid", "--seeds", seeds, "--logdir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not any(tmp_path.iterdir())
+
+
+def test_sweep_dir_is_an_alias_of_logdir(tmp_path, capsys):
+    args = ["--scenarios", "grid", "--algos", "a2cm", "--seeds", "0", "--sequential",
+            "--sweep-dir", str(tmp_path / "old"), "--no-record"]  # fmt: skip
+    args += [f"--set=train.{k}={v}" for k, v in TINY.items()]
+    assert sweep.main(args) == 0
+    assert (tmp_path / "old" / "grid-a2cm-s0" / "summary.json").exists()
