@@ -11,10 +11,12 @@ episode can be re-simulated from its seed and the pursuers' actions alone, whate
 it was played in.
 
 The evader is a policy injected into the core (:class:`EvaderPolicy`): each step the core
-asks it for every game's command and plays it by the mode's rules, written once. Pursuer
-actions are ``(B, N)`` integer moves, or with continuous control (SPEC §3b) ``(B, N, 2)``
-float velocity commands as fractions of ``max_speed``, which the core clips to the unit
-disc.
+asks it for every game's command and plays it by the mode's rules, written once. A learned
+evader (SPEC §1b) is the policy :class:`~.evader_learned.LearnedEvader`, which plays the
+actions given with the step: ``step(actions, evader_actions)``. Pursuer actions are
+``(B, N)`` integer moves, or with continuous control (SPEC §3b) ``(B, N, 2)`` float velocity
+commands as fractions of ``max_speed``, which the core clips to the unit disc; the
+evader's are ``(B,)`` moves or ``(B, 2)`` commands.
 """
 
 from __future__ import annotations
@@ -71,6 +73,15 @@ def team_reward(rewards: Rewards, mode: CollisionMode, captured, collisions, wal
     return reward
 
 
+def evader_reward(scenario: Scenario, outcome: StepOutcome) -> np.ndarray:
+    """A learned evader's reward in every game of a step, ``(B,)`` float64 (SPEC §1b):
+    minus the team reward (``rewards.evader = "zero_sum"``), or 1 for each step that does
+    not end in its capture (``"survival"``)."""
+    if scenario.rewards.evader == "survival":
+        return (~outcome.captured).astype(np.float64)
+    return -outcome.reward
+
+
 def ends_episode(mode: CollisionMode, captured, collisions):
     """Termination (SPEC §4): capture, or any collision in ``terminate`` mode."""
     return captured | (collisions > 0) if mode == "terminate" else captured
@@ -113,7 +124,12 @@ class EvaderPolicy(Protocol):
     """The evader of a batch of games, as a core plays it (scripted: :mod:`.evader`,
     :mod:`.evader_continuous`). A core owns the seed and step arrays it passes in; it calls
     :meth:`restart` for the games it resets and :meth:`forget` when it changes those arrays
-    in any other way (loading a state)."""
+    in any other way (loading a state). ``needs_positions`` says whether :meth:`moves`
+    reads the positions (a core may pass ``None`` otherwise). A policy with a method
+    ``give(evader_actions)`` takes its actions from outside (a learned evader): the core
+    gives it the actions passed with each step, before asking for its moves."""
+
+    needs_positions: bool
 
     def restart(self, envs: np.ndarray, seeds: np.ndarray) -> None:
         """Games ``envs`` start new episodes (``t = 0``) with episode ``seeds``."""
@@ -149,9 +165,10 @@ class Core(Protocol):
     ) -> None:
         """Start new episodes in games ``envs`` with episode ``seeds``."""
 
-    def step(self, actions: np.ndarray) -> StepOutcome:
+    def step(self, actions: np.ndarray, evader_actions: np.ndarray | None = None) -> StepOutcome:
         """Advance every game by one step with pursuer ``actions`` ``(B, N)``, or ``(B, N, 2)``
-        with continuous control."""
+        with continuous control; ``evader_actions`` ``(B,)`` or ``(B, 2)`` are required with a
+        learned evader and refused otherwise (``ValueError``)."""
 
     def observe(self) -> np.ndarray:
         """Global observations, float32 of shape ``(B, obs_dim)`` (SPEC §5)."""

@@ -135,6 +135,7 @@ class Evader:
         horizon: int | None = None,
     ) -> None:
         self.policy, self.n_actions = scenario.evader, scenario.actions
+        self.needs_positions = self.policy == "flee"  # the others ignore positions
         self.low, self.high = low, high
         self.horizon = horizon or max(1, min(64, 4096 // max(num_envs, 1)))
         random = self.policy == "random"  # store the moves themselves, else the draws

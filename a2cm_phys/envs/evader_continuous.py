@@ -82,6 +82,7 @@ class ContinuousEvader:
         horizon: int | None = None,
     ) -> None:
         self.policy = scenario.evader
+        self.needs_positions = self.policy != "static"
         self.low, self.high = float(low), float(high)
         self.turn = math.sqrt(3.0 * HEADING_DIFFUSION * scenario.physics.dt)
         self.margin = scenario.physics.max_speed * scenario.physics.dt  # one step's travel

@@ -1,4 +1,4 @@
-"""Choose the simulation core for a scenario's mode, and the scripted evader it plays."""
+"""Choose the simulation core for a scenario's mode, and the evader policy it plays."""
 
 from __future__ import annotations
 
@@ -23,9 +23,15 @@ def make_core(scenario: Scenario, num_envs: int, workers: int = 1) -> Core:
 
 
 def make_evader(scenario: Scenario, num_envs: int, low: float, high: float) -> EvaderPolicy:
-    """The scenario's scripted evader for ``num_envs`` games whose evader centre stays in
-    ``[low, high]²``: discrete moves (:class:`~.evader.Evader`) or, with continuous control,
-    velocity commands (:class:`~.evader_continuous.ContinuousEvader`)."""
+    """The scenario's evader for ``num_envs`` games whose evader centre stays in
+    ``[low, high]²``: scripted discrete moves (:class:`~.evader.Evader`) or, with continuous
+    control, velocity commands (:class:`~.evader_continuous.ContinuousEvader`); with
+    ``evader = "learned"`` the agent's actions, given with each step
+    (:class:`~.evader_learned.LearnedEvader`)."""
+    if scenario.evader == "learned":
+        from .evader_learned import LearnedEvader
+
+        return LearnedEvader(scenario, num_envs)
     if scenario.continuous:
         from .evader_continuous import ContinuousEvader
 

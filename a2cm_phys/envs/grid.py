@@ -15,13 +15,15 @@ import numpy as np
 from ..config import Scenario
 from .core import (
     ACTION_DELTAS,
+    EvaderPolicy,
     StepOutcome,
     agent_names,
     default_start,
     parse_positions,
     settle,
 )
-from .evader import Evader
+from .evader_learned import refuse_evader_actions
+from .factory import make_evader
 
 
 def meet(old_a: np.ndarray, new_a: np.ndarray, old_b: np.ndarray, new_b: np.ndarray) -> np.ndarray:
@@ -95,9 +97,15 @@ class GridRules:
 
 
 class GridCore:
-    """``num_envs`` independent grid games of one scenario (implements ``core.Core``)."""
+    """``num_envs`` independent grid games of one scenario (implements ``core.Core``).
 
-    def __init__(self, scenario: Scenario, num_envs: int = 1) -> None:
+    ``evader`` is the evader's policy (default: the scenario's, see
+    :func:`~.factory.make_evader`; with ``evader = "learned"`` its actions come with each
+    :meth:`step`)."""
+
+    def __init__(
+        self, scenario: Scenario, num_envs: int = 1, evader: EvaderPolicy | None = None
+    ) -> None:
         if scenario.mode != "grid":
             raise ValueError(f"GridCore needs a grid scenario, got mode={scenario.mode!r}")
         self.scenario = scenario
@@ -108,7 +116,9 @@ class GridCore:
         self.cells = np.repeat(self._start[:, None], num_envs, axis=1)  # (N + 1, B)
         self.t = np.zeros(num_envs, dtype=np.int64)
         self.episode_seed = np.zeros(num_envs, dtype=np.uint64)
-        self._evader = Evader(scenario, num_envs, 0, scenario.size - 1)
+        self._evader = evader or make_evader(scenario, num_envs, 0, scenario.size - 1)
+        self._looks = getattr(self._evader, "needs_positions", True)
+        self._give = getattr(self._evader, "give", None)  # a learned evader's mailbox
 
     def reset(
         self,
@@ -134,10 +144,15 @@ class GridCore:
                 raise ValueError(f"positions: {names[a]} and {names[b]} overlap at {cell}")
         return xy[:, 0] + self.scenario.size * xy[:, 1]
 
-    def step(self, actions: np.ndarray) -> StepOutcome:
-        """Advance every game one step; ``actions`` are the pursuers' ``(B, N)`` actions."""
+    def step(self, actions: np.ndarray, evader_actions: np.ndarray | None = None) -> StepOutcome:
+        """Advance every game one step; ``actions`` are the pursuers' ``(B, N)`` actions,
+        ``evader_actions`` a learned evader's ``(B,)`` (required then, refused otherwise)."""
         sc, n = self.scenario, self.scenario.pursuers
-        if sc.evader == "flee":  # only the flee policy looks at positions
+        if self._give is not None:
+            self._give(evader_actions)
+        elif evader_actions is not None:
+            raise refuse_evader_actions(sc)
+        if self._looks:  # of the scripted policies only flee looks at positions
             xy = self.rules.cell_xy[self.cells].astype(np.float64)  # (N + 1, B, 2)
             evader_xy, pursuer_xy = xy[n], xy[:n].transpose(1, 0, 2)
         else:

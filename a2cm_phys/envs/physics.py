@@ -59,6 +59,7 @@ from .core import (
     settle,
 )
 from .evader import STAY
+from .evader_learned import refuse_evader_actions
 from .factory import make_evader
 
 
@@ -364,8 +365,9 @@ class StateViews:
 class PhysicsCore(StateViews):
     """``num_envs`` independent physics games of one scenario (implements ``core.Core``).
 
-    ``evader`` is the evader's policy (default: the scenario's scripted evader, see
-    :func:`~.factory.make_evader`)."""
+    ``evader`` is the evader's policy (default: the scenario's, see
+    :func:`~.factory.make_evader`; with ``evader = "learned"`` its actions come with each
+    :meth:`step`)."""
 
     def __init__(
         self, scenario: Scenario, num_envs: int = 1, evader: EvaderPolicy | None = None
@@ -382,6 +384,7 @@ class PhysicsCore(StateViews):
         self._start = start_positions(scenario)
         radius = float(ph.evader_radius)  # the evader's centre stays this far from walls
         self._evader = evader or make_evader(scenario, num_envs, radius, scenario.size - radius)
+        self._give = getattr(self._evader, "give", None)  # a learned evader's mailbox
         self._continuous = scenario.continuous
         self._dt = ph.dt / ph.substeps
         self._velocity = [tuple(v) for v in (ACTION_DELTAS * ph.max_speed).astype(float).tolist()]
@@ -436,9 +439,14 @@ class PhysicsCore(StateViews):
 
     # ------------------------------------------------------------------ step
 
-    def step(self, actions: np.ndarray) -> StepOutcome:
+    def step(self, actions: np.ndarray, evader_actions: np.ndarray | None = None) -> StepOutcome:
         """Advance every game one control period with the pursuers' ``(B, N)`` actions, or
-        their ``(B, N, 2)`` velocity commands with continuous control."""
+        their ``(B, N, 2)`` velocity commands with continuous control; ``evader_actions``
+        (``(B,)`` or ``(B, 2)``) are a learned evader's, required then and refused otherwise."""
+        if self._give is not None:
+            self._give(evader_actions)
+        elif evader_actions is not None:
+            raise refuse_evader_actions(self.scenario)
         if self._continuous:
             return self._step_continuous(actions)
         sc, n = self.scenario, self.scenario.pursuers

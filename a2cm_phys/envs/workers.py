@@ -39,6 +39,7 @@ import numpy as np
 
 from ..config import Scenario
 from .core import StepOutcome
+from .evader_learned import refuse_evader_actions, take_evader_actions
 from .physics import PhysicsCore, StateViews, placed_positions, start_positions
 
 _GC_THRESHOLD = 10_000
@@ -57,10 +58,11 @@ class WorkerError(RuntimeError):
 
 class SharedBatch:
     """The arrays of a batch of ``num_envs`` physics games that the parent and its workers
-    share, in one block of shared memory. The parent writes the pursuers' actions and marks
-    games to reset (``reset``, with their ``seed``); the workers clear those marks and
-    write each field of the step outcome but the events, and the state (positions,
-    velocities). ``views(lo, hi)`` gives numpy views of games ``lo:hi``."""
+    share, in one block of shared memory. The parent writes the pursuers' actions (and a
+    learned evader's, ``evader_actions``) and marks games to reset (``reset``, with their
+    ``seed``); the workers clear those marks and write each field of the step outcome but
+    the events, and the state (positions, velocities). ``views(lo, hi)`` gives numpy views
+    of games ``lo:hi``."""
 
     def __init__(self, scenario: Scenario, num_envs: int, ctx: Any) -> None:
         n = scenario.pursuers
@@ -68,6 +70,7 @@ class SharedBatch:
         command = (np.dtype(np.float64), (2,)) if scenario.continuous else (np.dtype(np.int64), ())
         self.layout: list[tuple[str, np.dtype, tuple[int, ...]]] = [
             ("actions", command[0], (n, *command[1])),
+            ("evader_actions", *command),  # read only with a learned evader
             ("seed", np.dtype(np.uint64), ()),
             ("state", np.dtype(np.float64), (2, n + 1, 2)),
             ("reward", np.dtype(np.float64), ()),
@@ -163,6 +166,7 @@ def _serve(
         lo, hi = games
         core = PhysicsCore(scenario, hi - lo)
         mine = shared.views(lo, hi)
+        learned = scenario.evader == "learned"
         # Every rebuild leaves a pymunk space, joints and handlers as cyclic garbage, and
         # allocation-triggered GC runs rescan everything alive. This process only steps
         # worlds: collect rarely, and never rescan what exists now.
@@ -191,7 +195,7 @@ def _serve(
                 where = [placed.get(env) for env in envs.tolist()] if placed else None
                 core.reset(envs, mine["seed"][envs], where)
                 marked[envs] = False
-            outcome = core.step(mine["actions"])
+            outcome = core.step(mine["actions"], mine["evader_actions"] if learned else None)
             for name in _OUTCOME:
                 mine[name][:] = getattr(outcome, name)
             mine["state"][:] = core._state
@@ -310,13 +314,19 @@ class ProcessCore(StateViews):
             elif self._placed[w]:
                 self._placed[w].pop(env - int(self._bounds[w]), None)
 
-    def step(self, actions: np.ndarray) -> StepOutcome:
-        """Advance every game one step; the workers step their slices in parallel."""
+    def step(self, actions: np.ndarray, evader_actions: np.ndarray | None = None) -> StepOutcome:
+        """Advance every game one step; the workers step their slices in parallel.
+        ``evader_actions`` are a learned evader's (required then, refused otherwise)."""
         if self._closed:
             raise WorkerError("ProcessCore is closed")
         actions = np.asarray(actions)
         if actions.shape[0] != self.num_envs:
             raise ValueError(f"expected actions for {self.num_envs} games, got {actions.shape}")
+        if self.scenario.evader == "learned":  # checked here: a bad one changes no game
+            taken = take_evader_actions(self.scenario, evader_actions, self.num_envs)
+            self._views["evader_actions"][:] = taken
+        elif evader_actions is not None:
+            raise refuse_evader_actions(self.scenario)
         self._views["actions"][:] = actions  # before asking any worker
         for w in range(len(self._conns)):
             try:
