@@ -4,8 +4,8 @@ The batch is a dict of preallocated numpy arrays keyed as the learner reads them
 (:data:`~a2cm_phys.algos.learner.BATCH_KEYS`); :func:`collect` overwrites it in place each
 update, so the rollout loop allocates nothing of its own. Actions are stored with the shape
 and dtype of the policy's distribution (int64 indices, or float32 velocity commands), and
-the raw team reward is stored beside its components (``reward_parts``) for learners that
-value them apart.
+the raw team reward is stored beside its components (``reward_parts``) and the pursuer
+collisions of each step, for learners that value them apart or constrain collisions.
 """
 
 from __future__ import annotations
@@ -54,6 +54,7 @@ def allocate_batch(
         "actions": np.zeros((steps, num_envs, n_agents, *action_shape), dtype=action_dtype),
         "rewards": np.zeros((steps, num_envs), dtype=np.float64),
         "reward_parts": np.zeros((steps, num_envs, len(REWARD_PARTS)), dtype=np.float64),
+        "collisions": np.zeros((steps, num_envs), dtype=np.int64),
         "terminated": np.zeros((steps, num_envs), dtype=bool),
         "truncated": np.zeros((steps, num_envs), dtype=bool),
         "final_obs": np.zeros((steps, num_envs, obs_dim), dtype=np.float32),
@@ -76,7 +77,7 @@ def collect(
     """
     b_obs, b_actions, b_rewards = batch["obs"], batch["actions"], batch["rewards"]
     b_term, b_trunc, b_final = batch["terminated"], batch["truncated"], batch["final_obs"]
-    b_parts = batch["reward_parts"]
+    b_parts, b_coll = batch["reward_parts"], batch["collisions"]
     scenario = env.scenario
     episodes: list[EpisodeSummary] = []
     for t in range(len(b_obs)):
@@ -86,6 +87,7 @@ def collect(
         b_actions[t] = actions
         b_rewards[t] = step.reward
         reward_parts(scenario, step.outcome, b_parts[t])
+        b_coll[t] = step.outcome.collisions
         b_term[t] = step.terminated
         b_trunc[t] = step.truncated
         b_final[t] = step.final_obs

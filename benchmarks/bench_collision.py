@@ -52,6 +52,45 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "+advnorm+b256": {"num_envs": 32, "batch_size": 256, "normalize_advantages": True},
     "+advnorm+ent": {"num_envs": 16, "normalize_advantages": True, "entropy_coef": 1e-2},
     "+advnorm+clip": {"num_envs": 16, "normalize_advantages": True, "max_grad_norm": 0.5},
+    "+advnorm+anneal": {"num_envs": 16, "normalize_advantages": True, "lr_schedule": "linear"},
+    "+split+anneal": {
+        "num_envs": 16,
+        "value_norm": True,
+        "split_rewards": True,
+        "lr_schedule": "linear",
+    },
+    "+split+advnorm+anneal": {
+        "num_envs": 16,
+        "value_norm": True,
+        "split_rewards": True,
+        "normalize_advantages": True,
+        "lr_schedule": "linear",
+    },
+    "+advnorm+lr3e-3": {"num_envs": 16, "normalize_advantages": True, "lr": 3e-3},
+    "+lagrange": {
+        "num_envs": 16,
+        "value_norm": True,
+        "split_rewards": True,
+        "normalize_advantages": True,
+        "constrain_collisions": True,
+    },
+    "+lagrange+anneal": {
+        "num_envs": 16,
+        "value_norm": True,
+        "split_rewards": True,
+        "normalize_advantages": True,
+        "constrain_collisions": True,
+        "lr_schedule": "linear",
+    },
+    "+lagrange10+anneal": {
+        "num_envs": 16,
+        "value_norm": True,
+        "split_rewards": True,
+        "normalize_advantages": True,
+        "constrain_collisions": True,
+        "lagrange_lr": 10.0,
+        "lr_schedule": "linear",
+    },
     "ours": {},  # the defaults
 }
 

@@ -14,7 +14,12 @@ one per agent: the only difference). An update is a sequence of small pieces:
 3. **the actors' advantage**: the components' advantages summed (each divided by its own
    scale when ``split_rewards``, so that a rare catastrophic cost and a small running cost
    both reach the policy), optionally normalised over the batch; A2C gives actor i its own
-   critic's advantage, A2CM the shared one;
+   critic's advantage, A2CM the shared one. With ``constrain_collisions`` the collision
+   component is a constraint instead of a cost: the actors maximise the time objective
+   subject to at most ``collision_budget`` collisions per step, ``A = (A_time + λ·A_coll) /
+   (1 + λ)``, with the Lagrange multiplier ``λ ≥ 0`` learned by dual ascent (``λ += lagrange_lr
+   · (collisions per step − budget)`` after each batch): it starts at 0, so the team first
+   learns to catch, and rises only as long as collisions happen;
 4. **loss** ``Σ_i [−mean(A_i · log π_i(a_i|s)) − entropy_coef · H(π_i)] + value_coef ·
    Σ_c MSE_c`` (critics regress their normalised targets) and one optimiser step (RMSprop
    as Keras has it, the paper's, or Adam), with optional gradient clipping.
@@ -84,8 +89,9 @@ class Learner:
         self.optimizer = make_optimizer(model, train_cfg)
         self.device = next(model.parameters()).device
         self.value_norm = ValueNorm(model.n_values) if train_cfg.value_norm else None
+        self.multiplier = 0.0  # the collision constraint's Lagrange multiplier λ ≥ 0
 
-    def update(self, batch: Mapping[str, Any]) -> dict[str, float]:
+    def update(self, batch: Mapping[str, Any], progress: float = 0.0) -> dict[str, float]:
         """One gradient step on a rollout batch; returns scalar metrics.
 
         Args:
@@ -94,6 +100,8 @@ class Learner:
                 ``reward_parts (T,B,K)`` when the model has K values per critic),
                 ``terminated``/``truncated (T,B)`` bool, ``final_obs (T,B,obs_dim)`` (only
                 read where truncated), ``next_obs (B,obs_dim)``.
+            progress: the fraction of the run done before this update, in ``[0, 1)``: the
+                learning rate is ``lr · (1 − progress)`` when ``lr_schedule = "linear"``.
 
         Returns:
             ``policy_loss`` (Σ over agents), ``value_loss`` (Σ over critics and components
@@ -139,6 +147,11 @@ class Learner:
             else:
                 targets = returns.float()
             actor_adv = self._actor_advantage(torch.as_tensor(adv, device=dev))  # (T,B,C)
+            if cfg.constrain_collisions:  # dual ascent on λ (after it weighed this batch)
+                rate = float(np.mean(batch["collisions"]))
+                self.multiplier = max(
+                    0.0, self.multiplier + cfg.lagrange_lr * (rate - cfg.collision_budget)
+                )
 
         out = self._critic(obs)  # (T, B, C, K), with gradient
         dist_out = model.actor_outputs(obs)
@@ -164,6 +177,8 @@ class Learner:
             "loss": total,
             "grad_norm": math.nan,
         }
+        if cfg.constrain_collisions:
+            metrics["multiplier"] = self.multiplier
         if not math.isfinite(total):
             raise NonFiniteLoss(f"non-finite loss {total} (no step taken)", metrics)
         self.optimizer.zero_grad(set_to_none=True)
@@ -179,14 +194,21 @@ class Learner:
             raise NonFiniteLoss(
                 f"non-finite gradient norm {metrics['grad_norm']} (no step taken)", metrics
             )
+        if cfg.lr_schedule == "linear":
+            for group in self.optimizer.param_groups:
+                group["lr"] = cfg.lr * (1.0 - progress)
         self.optimizer.step()
         return metrics
 
     # ------------------------------------------------------------------ pieces
     def _rewards(self, batch: Mapping[str, Any]) -> np.ndarray:
         """Scaled rewards ``(T, B, K)``: the components if the model has K values, else
-        the team reward as one component."""
-        if self.model.n_values > 1:
+        the team reward as one component. Under the collision constraint the second
+        component is minus the collision count (the constraint's cost), not the penalty."""
+        if self.cfg.constrain_collisions:
+            parts = np.asarray(batch["reward_parts"], dtype=np.float64).copy()
+            parts[..., 1] = -np.asarray(batch["collisions"], dtype=np.float64)
+        elif self.model.n_values > 1:
             parts = np.asarray(batch["reward_parts"], dtype=np.float64)
             if parts.shape[-1] != self.model.n_values:
                 raise ValueError(
@@ -211,7 +233,11 @@ class Learner:
         if self.cfg.split_rewards and self.value_norm is not None:
             _, std = self.value_norm.stats()
             adv = adv / std.to(adv.dtype)
-        combined = adv.sum(-1)
+        if self.cfg.constrain_collisions:  # time + λ·(minus collisions), both normalised
+            lam = self.multiplier
+            combined = (adv[..., 0] + lam * adv[..., 1]) / (1.0 + lam)
+        else:
+            combined = adv.sum(-1)
         if self.cfg.normalize_advantages and combined.numel() > 1:
             combined = (combined - combined.mean()) / (combined.std() + 1e-8)
         return combined.float()
@@ -220,7 +246,11 @@ class Learner:
     def state_dict(self) -> dict[str, Any]:
         """Model, optimiser and normaliser state, for a bit-exact resume (a deep copy:
         torch's own state dicts alias the live tensors)."""
-        state = {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict()}
+        state = {
+            "model": self.model.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "multiplier": self.multiplier,
+        }
         if self.value_norm is not None:
             state["value_norm"] = self.value_norm.state_dict()
         return copy.deepcopy(state)
@@ -231,3 +261,4 @@ class Learner:
         self.optimizer.load_state_dict(copy.deepcopy(state["optimizer"]))
         if self.value_norm is not None and "value_norm" in state:
             self.value_norm.load_state_dict(state["value_norm"])
+        self.multiplier = float(state.get("multiplier", 0.0))
