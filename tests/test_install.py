@@ -3,8 +3,9 @@
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
+
+import tomllib
 
 import a2cm_phys
 from a2cm_phys.config import SCENARIO_DIR, scenario_names
