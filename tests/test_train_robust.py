@@ -110,11 +110,11 @@ def test_a_dead_worker_saves_progress_names_it_and_says_how_to_resume(
 
     step, calls = ProcessCore.step, []
 
-    def step_then_die(self, actions):
+    def step_then_die(self, *args):
         calls.append(1)
         if len(calls) == 4 * 6 + 2:  # inside update 7 (4 steps per game and update)
             os.kill(self._procs[1].pid, signal.SIGKILL)
-        return step(self, actions)
+        return step(self, *args)
 
     monkeypatch.setattr(ProcessCore, "step", step_then_die)
     run_dir = tmp_path / "run"
