@@ -260,6 +260,7 @@ TRAIN_LIMITS: dict[str, tuple[int, str]] = {
     "threads": (256, "each torch thread needs memory of its own"),
     "workers": (256, "each worker is a process"),
     "seed": (2**64 - 1, "seeds feed 64-bit generators"),
+    "lr": (1000, "a step size; far larger ones overflow the optimiser's float32 arithmetic"),
 }
 """Largest training values, with the reason."""
 
