@@ -164,7 +164,7 @@ def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
         run = Path(args.resume)
         writable_dir(run if run.is_dir() else run.parent, "--resume")
         trainer = Trainer.resume(args.resume, args.updates, **options)
-        _append_command(trainer.run_dir, command, trainer.update, trainer.cfg)
+        _append_command(trainer.run_dir, command, trainer.update, trainer)
         return trainer
     if not args.scenario:
         raise UsageError("--scenario is required (or --resume RUN_DIR)")
@@ -194,10 +194,13 @@ def write_config(run_dir: Path, scenario: Scenario, cfg: Train, command: str) ->
     (Path(run_dir) / "config.json").write_text(json.dumps(config, indent=2) + "\n")
 
 
-def _append_command(run_dir: Path, command: str, update: int, cfg: Train) -> None:
+def _append_command(run_dir: Path, command: str, update: int, trainer: Trainer) -> None:
     path = run_dir / "config.json"
-    config = json.loads(path.read_text()) if path.exists() else {}
-    config["train"] = to_dict(cfg)
+    try:
+        config = json.loads(path.read_text())
+    except (OSError, ValueError):  # missing or damaged: the checkpoint has the config
+        config = {"scenario": to_dict(trainer.scenario), "rebuilt_from_checkpoint": True}
+    config["train"] = to_dict(trainer.cfg)
     config.setdefault("resumed", []).append({"command": command, "at_update": update})
     path.write_text(json.dumps(config, indent=2) + "\n")
 

@@ -29,6 +29,7 @@ CASES = [
     ("train", ["--checkpoint-every", "-1"], "--checkpoint-every"),
     ("train", ["--lr", "nan"], "lr"),
     ("train", ["--lr", "inf"], "lr"),
+    ("train", ["--lr", "1e308"], "'lr': must be at most"),
     ("train", ["--algo", "ppo"], "--algo"),
     ("train", ["--preset", "nope"], "--preset"),
     ("train", ["--frobnicate"], "--frobnicate"),

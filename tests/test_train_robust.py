@@ -150,3 +150,12 @@ def test_a_scenario_name_cannot_leave_the_logdir(tmp_path, capsys, name):
     assert "'name'" in capsys.readouterr().err
     assert not any(p.is_file() for p in tmp_path.rglob("*"))
     assert not list(Path("/tmp").glob("a2cm-escape*"))
+
+
+def test_resume_with_a_damaged_config_json_rebuilds_it(tmp_path):
+    run_dir = tmp_path / "run"
+    assert main([*GRID, "--updates", "2", "--run-dir", str(run_dir), "--no-record"]) == 0
+    (run_dir / "config.json").write_text("{damaged")
+    assert main(["--resume", str(run_dir), "--updates", "3", "--no-progress"]) == 0
+    config = json.loads((run_dir / "config.json").read_text())
+    assert config["train"]["updates"] == 3 and config["scenario"]["name"] == "grid"
