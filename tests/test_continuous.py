@@ -17,7 +17,11 @@ from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.envs.workers import ProcessCore
 from a2cm_phys.render import render_rgb
 
-CONT = [name for name in scenario_names() if name.startswith("phys_cont")]
+CONT = [  # scripted evaders (tests/test_learned_evader.py has the learned one)
+    name
+    for name in scenario_names()
+    if name.startswith("phys_cont") and load_scenario(name).evader != "learned"
+]
 RIGHT, LEFT, UP, DOWN, STOP = (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0), (0.0, 0.0)
 HEAD_ON = {"pursuer_0": (1.5, 2.5), "pursuer_1": (3.5, 2.5)}
 AWAY = {"pursuer_2": (0.5, 4.5), "evader": (4.5, 4.5)}

@@ -413,10 +413,11 @@ def test_process_core_stops_a_worker_that_does_not_answer():
     sc = load_scenario("phys")
     with pytest.raises(ValueError, match="timeout"):
         ProcessCore(sc, 2, 2, timeout=0)
-    core = ProcessCore(sc, 4, 2, timeout=0.5)
+    core = ProcessCore(sc, 4, 2, timeout=60)  # starting may take long on a loaded machine
     try:
         actions = np.zeros((4, sc.pursuers), dtype=np.int64)
         core.step(actions)
+        core.timeout = 0.5
         hung = core._procs[0]
         os.kill(hung.pid, signal.SIGSTOP)  # alive, but it will never answer
         with pytest.raises(WorkerError, match=r"worker 0 .* did not answer within 0.5 s"):

@@ -18,6 +18,8 @@ from .factory import make_core
 class Game:
     """A single game of ``scenario``: one core with ``B = 1`` plus its seed generator.
 
+    With a learned evader (``evader = "learned"``) each :meth:`step` takes its action too.
+
     ``reset(seed)`` seeds the generator that draws episode seeds; a later ``reset()``
     without a seed draws the next episode seed from it (unseeded at first use: OS entropy).
     """
@@ -48,10 +50,15 @@ class Game:
         self.last = None
         return episode_seed
 
-    def step(self, joint_action: np.ndarray, checked: bool = False) -> StepOutcome:
+    def step(
+        self, joint_action: np.ndarray, checked: bool = False, evader_action: Any = None
+    ) -> StepOutcome:
         """Advance the game with the pursuers' actions ``(N,)``, or with continuous control
         their commands ``(N, 2)``; raises on invalid actions unless the caller has ``checked``
-        them already (and passes them as ``(1, N)`` int64, or ``(1, N, 2)`` floats)."""
+        them already (and passes them as ``(1, N)`` int64, or ``(1, N, 2)`` floats).
+        ``evader_action`` (a move, or a ``(vx, vy)`` command) is a learned evader's: required
+        then, refused otherwise, always checked (a ``ValueError`` naming ``evader``)."""
+        evader = None if evader_action is None else np.asarray(evader_action)[None]
         if not checked and self.scenario.continuous:
             actions = np.asarray(joint_action)
             shape = action_shape(self.scenario)
@@ -61,7 +68,7 @@ class Game:
                     f" got {joint_action!r}"
                 )
             check_commands(actions[None], self.names)
-            self.last = self.core.step(actions[None])
+            self.last = self.core.step(actions[None], evader)
             return self.last
         actions = joint_action if checked else np.asarray(joint_action).reshape(1, -1)
         if not checked:
@@ -71,7 +78,7 @@ class Game:
                     f" got {joint_action!r}"
                 )
             check_actions(actions, self.scenario.actions, self.names)
-        self.last = self.core.step(actions)
+        self.last = self.core.step(actions, evader)
         return self.last
 
     def observation(self) -> np.ndarray:

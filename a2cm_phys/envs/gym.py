@@ -2,6 +2,10 @@
 
 One ``MultiDiscrete`` action holds every pursuer's move, or with continuous control one
 ``Box(-1, 1, (N, 2))`` every pursuer's velocity command; the reward is the team reward.
+It serves scripted evaders only: one agent with one reward cannot be both teams of a game
+with a learned evader (``evader = "learned"``, SPEC §1b), which is refused with a
+:class:`~a2cm_phys.config.ConfigError` naming the key; use ``make_env`` (the evader is an
+agent there) or ``VectorEnv``.
 """
 
 from __future__ import annotations
@@ -12,14 +16,14 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 
-from ..config import Scenario, load_scenario
+from ..config import ConfigError, Scenario, load_scenario
 from .game import Game
 from .parallel import observation_space
 
 
 class PursuitEnv(gym.Env):
     """All pursuers as one agent: ``MultiDiscrete([A] * N)`` or ``Box(-1, 1, (N, 2))``
-    actions, the team reward."""
+    actions, the team reward; scripted evaders only (see the module docstring)."""
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
 
@@ -30,6 +34,12 @@ class PursuitEnv(gym.Env):
         **overrides: Any,
     ) -> None:
         self.scenario = load_scenario(scenario, overrides)
+        if self.scenario.evader == "learned":
+            raise ConfigError(
+                f"scenario '{self.scenario.name}': key 'evader': the Gymnasium joint view "
+                "(a2cm_phys/Pursuit-v0) serves scripted evaders only (random, flee, static), "
+                "got 'learned'; use a2cm_phys.make_env, where the evader is an agent"
+            )
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         self.render_mode = render_mode

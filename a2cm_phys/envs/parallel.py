@@ -2,7 +2,8 @@
 
 Dicts keyed by agent in, dicts keyed by agent out; the rules live in the core. The class
 follows PettingZoo's ``ParallelEnv`` protocol without importing PettingZoo, which is only
-needed to run its conformance tests.
+needed to run its conformance tests. With a learned evader (SPEC §1b, ``evader =
+"learned"``) the evader is the last agent, ``"evader"``.
 """
 
 from __future__ import annotations
@@ -15,6 +16,8 @@ import numpy as np
 from gymnasium import spaces
 
 from ..config import Scenario, load_scenario
+from .core import evader_reward
+from .evader_learned import EVADER
 from .game import Game
 
 
@@ -29,20 +32,25 @@ def observation_space(scenario: Scenario) -> spaces.Box:
 
 
 def action_space(scenario: Scenario) -> spaces.Discrete | spaces.Box:
-    """One pursuer's actions: ``Discrete(4)`` (up, down, left, right), ``Discrete(5)`` with
-    stay, or with continuous control ``Box(-1, 1, (2,))``, its velocity command as a
-    fraction of ``max_speed`` (clipped to the unit disc by the env)."""
+    """One agent's actions (a pursuer's, or a learned evader's): ``Discrete(4)`` (up, down,
+    left, right), ``Discrete(5)`` with stay, or with continuous control ``Box(-1, 1, (2,))``,
+    its velocity command as a fraction of ``max_speed`` (clipped to the unit disc by the
+    env)."""
     if scenario.continuous:
         return spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
     return spaces.Discrete(scenario.actions)
 
 
 class PursuitParallelEnv:
-    """The pursuit game for N pursuers, PettingZoo parallel style; the evader is scripted.
+    """The pursuit game for N pursuers, PettingZoo parallel style.
 
-    Every pursuer observes the global state and receives the team reward. ``infos[agent]``
-    carries ``captured``, ``collisions``, ``wall_contacts``, ``evader_action``, ``t`` and,
-    in physics mode, ``events`` (the contact events that began in this step).
+    Every pursuer observes the global state and receives the team reward. The evader is
+    scripted, or with ``evader = "learned"`` the agent ``"evader"`` (last in
+    ``possible_agents``): it observes the same global state, acts in the pursuers' kind of
+    action space, and receives :func:`~.core.evader_reward` (``rewards.evader``: minus the
+    team reward by default). ``infos[agent]`` carries ``captured``, ``collisions``,
+    ``wall_contacts``, ``evader_action``, ``t`` and, in physics mode, ``events`` (the
+    contact events that began in this step).
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -57,7 +65,8 @@ class PursuitParallelEnv:
         self.scenario = scenario
         self.render_mode = render_mode
         self.game = Game(scenario)
-        self.possible_agents = list(scenario.agents)
+        self.learned_evader = scenario.evader == "learned"
+        self.possible_agents = [*scenario.agents, *([EVADER] if self.learned_evader else [])]
         self.agents: list[str] = []
         self._observation_space = observation_space(scenario)
         self._action_space = action_space(scenario)
@@ -65,11 +74,11 @@ class PursuitParallelEnv:
         self.episode_seed: int | None = None
 
     def observation_space(self, agent: str) -> spaces.Box:
-        """Every pursuer observes the global state vector."""
+        """Every agent observes the global state vector."""
         return self._observation_space
 
     def action_space(self, agent: str) -> spaces.Discrete | spaces.Box:
-        """Every pursuer's action space (see :func:`action_space`)."""
+        """Every agent's action space, the evader's too (see :func:`action_space`)."""
         return self._action_space
 
     def reset(
@@ -83,7 +92,8 @@ class PursuitParallelEnv:
         return {a: obs for a in self.agents}, {a: dict(info) for a in self.agents}
 
     def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
-        """Move every pursuer (one action each) and the evader; see the class docstring."""
+        """Move every agent (one action each; a scripted evader moves by itself); see the
+        class docstring."""
         if not self.agents:
             raise RuntimeError("step() called on a finished episode: call reset() first")
         try:
@@ -94,10 +104,12 @@ class PursuitParallelEnv:
             missing = [a for a in self.agents if a not in actions]
             unknown = [a for a in actions if a not in self.agents]
             raise ValueError(f"actions: missing {missing}, unknown {unknown}")
-        if self.scenario.continuous:
-            out = self.game.step(self._commands(joint), checked=True)
+        joint_array = self._commands(joint) if self.scenario.continuous else self._moves(joint)
+        if self.learned_evader:  # the evader is the last agent
+            n = self.scenario.pursuers
+            out = self.game.step(joint_array[:, :n], checked=True, evader_action=joint_array[0, n])
         else:
-            out = self.game.step(self._moves(joint), checked=True)
+            out = self.game.step(joint_array, checked=True)
         obs = self.game.observation()
         info = self.game.info()
         reward = float(out.reward[0])
@@ -105,16 +117,20 @@ class PursuitParallelEnv:
         agents = self.agents
         if terminated or truncated:
             self.agents = []
+        rewards = dict.fromkeys(agents, reward)
+        if self.learned_evader:
+            rewards[EVADER] = float(evader_reward(self.scenario, out)[0])
         return (
             dict.fromkeys(agents, obs),
-            dict.fromkeys(agents, reward),
+            rewards,
             dict.fromkeys(agents, terminated),
             dict.fromkeys(agents, truncated),
             {a: info.copy() for a in agents},
         )
 
     def _moves(self, joint: list[Any]) -> np.ndarray:
-        """The discrete joint action as ``(1, N)`` int64, or a ``ValueError`` naming the agent."""
+        """The discrete joint action as ``(1, agents)`` int64, or a ``ValueError`` naming the
+        agent."""
         n_actions = self.scenario.actions
         for agent, value in zip(self.agents, joint, strict=True):
             if type(value) is int and 0 <= value < n_actions:  # the common case first
@@ -127,8 +143,9 @@ class PursuitParallelEnv:
         return np.array([joint], dtype=np.int64)
 
     def _commands(self, joint: list[Any]) -> np.ndarray:
-        """The continuous joint action as ``(1, N, 2)`` float64, or a ``ValueError`` naming
-        the agent whose value is not two finite numbers (out-of-range ones are clipped)."""
+        """The continuous joint action as ``(1, agents, 2)`` float64, or a ``ValueError``
+        naming the agent whose value is not two finite numbers (out-of-range ones are
+        clipped)."""
         try:
             commands = np.array([joint], dtype=np.float64)
         except (TypeError, ValueError):
@@ -150,7 +167,7 @@ class PursuitParallelEnv:
         )
 
     def state(self) -> np.ndarray:
-        """The global state: the same vector every pursuer observes."""
+        """The global state: the same vector every agent observes."""
         return self.game.observation()
 
     def render(self) -> str | np.ndarray | None:

@@ -3,6 +3,12 @@
 A finished game is restarted within the same ``step`` call; the step still reports the
 finished episode's final observation (``final_obs``, for the truncation bootstrap) and an
 :class:`EpisodeSummary`. Episode seeds come from one generator seeded at ``reset(seed)``.
+
+With a learned evader (SPEC §1b, ``evader = "learned"``) the evader is a second team of one:
+``step(actions, evader_actions)`` takes its actions too (``(B,)`` int64 moves, or ``(B, 2)``
+float commands with continuous control), and each step and episode report its reward
+(``VecStep.evader_reward``) and return (``EpisodeSummary.evader_ret``) beside the
+pursuers'. It observes the same global state as the pursuers (``obs``).
 """
 
 from __future__ import annotations
@@ -14,13 +20,15 @@ from typing import Any
 import numpy as np
 
 from ..config import Scenario
-from .core import StepOutcome, action_shape, check_joint_actions
+from .core import StepOutcome, action_shape, check_joint_actions, evader_reward
+from .evader_learned import evader_action_shape
 from .factory import make_core
 
 
 @dataclass(frozen=True)
 class EpisodeSummary:
-    """One finished episode of a vector env."""
+    """One finished episode of a vector env (``ret``: the pursuers' team return;
+    ``evader_ret``: a learned evader's return, ``None`` with a scripted evader)."""
 
     env: int
     seed: int
@@ -31,6 +39,7 @@ class EpisodeSummary:
     collision_terminated: bool
     collisions: int
     wall_contacts: int
+    evader_ret: float | None = None
 
 
 @dataclass
@@ -41,6 +50,8 @@ class VecStep:
     ended); ``final_obs`` equals ``obs`` except in rows that finished, where it holds the
     last observation of the finished episode. ``positions`` (and ``velocities`` in physics
     mode) are the agents' positions at the end of this step, before any auto-reset.
+    ``reward`` is the pursuers' team reward; ``evader_reward`` a learned evader's (``(B,)``
+    float64, see :func:`~.core.evader_reward`), ``None`` with a scripted evader.
     """
 
     obs: np.ndarray
@@ -52,10 +63,15 @@ class VecStep:
     positions: np.ndarray
     velocities: np.ndarray | None
     episodes: list[EpisodeSummary]
+    evader_reward: np.ndarray | None = None
 
 
 class VectorEnv:
-    """``num_envs`` games of one scenario stepped together, restarted automatically."""
+    """``num_envs`` games of one scenario stepped together, restarted automatically.
+
+    ``learned_evader`` says whether the evader is an agent whose actions each :meth:`step`
+    takes (``evader_action_shape`` per game: ``()`` a move in ``[0, n_actions)``, or
+    ``(2,)`` a command); see the module docstring."""
 
     def __init__(self, scenario: Scenario, num_envs: int = 1, workers: int = 1) -> None:
         self.scenario = scenario
@@ -63,10 +79,13 @@ class VectorEnv:
         self.n_agents = scenario.pursuers
         self.n_actions = scenario.actions  # discrete moves (unused with continuous control)
         self.action_shape = action_shape(scenario)  # one game's joint action
+        self.learned_evader = scenario.evader == "learned"
+        self.evader_action_shape = evader_action_shape(scenario)  # one game's evader action
         self.obs_dim = scenario.obs_dim
         self.core = make_core(scenario, num_envs, workers)
         self._seeds = np.random.default_rng(0)
         self._return = np.zeros(num_envs)
+        self._evader_return = np.zeros(num_envs)
         self._collisions = np.zeros(num_envs, dtype=np.int64)
         self._walls = np.zeros(num_envs, dtype=np.int64)
 
@@ -81,6 +100,7 @@ class VectorEnv:
         seeds = self._seeds.integers(0, 2**63, size=len(envs)).astype(np.uint64)
         self.core.reset(envs, seeds)
         self._return[envs] = 0.0
+        self._evader_return[envs] = 0.0
         self._collisions[envs] = 0
         self._walls[envs] = 0
 
@@ -96,6 +116,7 @@ class VectorEnv:
             "core": core_state() if core_state is not None else None,
             "seeds": self._seeds.bit_generator.state,
             "return": self._return.copy(),
+            "evader_return": self._evader_return.copy(),
             "collisions": self._collisions.copy(),
             "walls": self._walls.copy(),
         }
@@ -107,6 +128,7 @@ class VectorEnv:
         if state["core"] is not None and hasattr(self.core, "load_state"):
             self.core.load_state(state["core"])
             self._return[:] = state["return"]
+            self._evader_return[:] = state.get("evader_return", 0.0)
             self._collisions[:] = state["collisions"]
             self._walls[:] = state["walls"]
         else:
@@ -117,15 +139,26 @@ class VectorEnv:
         """The episode seed of the episode running in each game."""
         return self.core.episode_seed.copy()
 
-    def step(self, actions: np.ndarray, validate: bool = True) -> VecStep:
+    def step(
+        self,
+        actions: np.ndarray,
+        evader_actions: np.ndarray | None = None,
+        validate: bool = True,
+    ) -> VecStep:
         """Step every game with pursuer ``actions`` ``(B, N)`` (``(B, N, 2)`` commands with
-        continuous control); restart finished games."""
+        continuous control) and a learned evader's ``evader_actions`` ``(B,)`` (``(B, 2)``);
+        restart finished games. ``validate=False`` skips the pursuers' checks; the evader's
+        (required with a learned evader, refused otherwise) are always made."""
         if validate:
             check_joint_actions(self.scenario, actions)
         core = self.core
         seeds, lengths = core.episode_seed.copy(), core.t + 1
-        out = core.step(actions)
+        out = core.step(actions, evader_actions)
         self._return += out.reward
+        evader_rewards = None
+        if self.learned_evader:
+            evader_rewards = evader_reward(self.scenario, out)
+            self._evader_return += evader_rewards
         self._collisions += out.collisions
         self._walls += out.wall_contacts
         obs = core.observe()
@@ -146,6 +179,7 @@ class VectorEnv:
                     collision_terminated=bool(out.terminated[i] and not out.captured[i]),
                     collisions=int(self._collisions[i]),
                     wall_contacts=int(self._walls[i]),
+                    evader_ret=float(self._evader_return[i]) if self.learned_evader else None,
                 )
                 for i in envs
             ]
@@ -162,6 +196,7 @@ class VectorEnv:
             positions=positions,
             velocities=velocities,
             episodes=episodes,
+            evader_reward=evader_rewards,
         )
 
     def close(self) -> None:
