@@ -25,7 +25,8 @@ SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 the checkout's top-level ``scenarios/`` is a symbolic link to it."""
 
 Mode = Literal["grid", "physics"]
-EvaderPolicy = Literal["random", "flee", "static"]
+EvaderPolicy = Literal["random", "flee", "static", "learned"]  # learned: an agent (SPEC §1b)
+EvaderReward = Literal["zero_sum", "survival"]
 CollisionMode = Literal["off", "terminate", "penalize"]
 Algo = Literal["a2c", "a2cm"]
 Control = Literal["discrete", "continuous"]
@@ -40,12 +41,18 @@ class ConfigError(ValueError):
 
 @dataclass(frozen=True)
 class Rewards:
-    """Team reward terms (SPEC §4); the reward is logged raw, learners may scale it."""
+    """Team reward terms (SPEC §4); the reward is logged raw, learners may scale it.
+
+    ``evader`` is a learned evader's reward (SPEC §1b): ``zero_sum``, minus the team reward,
+    or ``survival``, +1 for every step that does not end in its capture (its return is the
+    number of steps it survived). Scripted evaders have no reward.
+    """
 
     step: float = -1.0
     collision: float = 0.0
     capture: float = 0.0
     wall: float = 0.0
+    evader: EvaderReward = "zero_sum"
 
 
 @dataclass(frozen=True)
