@@ -171,6 +171,8 @@ def execute(spec: RunSpec, sweep_dir: str) -> dict[str, Any]:
         status = trainer.run()
     finally:
         trainer.close()
+    if status == "interrupted":  # Ctrl-C or SIGTERM: the checkpoint is saved, stop the sweep
+        raise KeyboardInterrupt
     if status != "done":
         raise RuntimeError(f"{spec.name}: training stopped ({status}) {trainer.stop_reason}")
     return {**trainer.last_summary, "sweep": "resumed" if state == "partial" else "ran"}

@@ -192,3 +192,20 @@ def test_sweep_dir_is_an_alias_of_logdir(tmp_path, capsys):
     args += [f"--set=train.{k}={v}" for k, v in TINY.items()]
     assert sweep.main(args) == 0
     assert (tmp_path / "old" / "grid-a2cm-s0" / "summary.json").exists()
+
+
+def test_an_interrupt_stops_the_sweep_instead_of_retrying(tmp_path, monkeypatch, capsys):
+    from a2cm_phys.train import Trainer
+
+    original, calls = Trainer._one_update, []
+
+    def interrupt_at_update_2(self, on_step):
+        calls.append(self.update)
+        if self.update == 2:
+            raise KeyboardInterrupt
+        original(self, on_step)
+
+    monkeypatch.setattr(Trainer, "_one_update", interrupt_at_update_2)
+    assert _sweep(tmp_path, "--seeds", "0-1") == 130
+    assert calls == [0, 1, 2]  # neither retried nor the next run started
+    assert "run the same command to resume" in capsys.readouterr().err
