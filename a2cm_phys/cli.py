@@ -50,7 +50,8 @@ class Parser(argparse.ArgumentParser):
 def run_cli(body: Callable[[Sequence[str]], int], argv: Sequence[str] | None = None) -> int:
     """Run ``body(argv)`` (default ``sys.argv[1:]``) and return its exit status; a user error
     prints ``error: …`` (one line) and gives :data:`EXIT_USAGE`, Ctrl-C gives
-    :data:`EXIT_INTERRUPTED`, a closed stdout (``| head``) ends quietly."""
+    :data:`EXIT_INTERRUPTED`, running out of memory is one line too, a closed stdout
+    (``| head``) ends quietly."""
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         return body(argv)
@@ -59,6 +60,8 @@ def run_cli(body: Callable[[Sequence[str]], int], argv: Sequence[str] | None = N
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except MemoryError as err:  # values within the limits can still be too much for a machine
+        return fail(f"out of memory ({err or 'MemoryError'}): ask for less (games, batch, arena)")
     except BrokenPipeError:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0

@@ -175,12 +175,19 @@ def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
     if args.run_dir:
         run_dir = Path(args.run_dir)
         check_new_run_dir(run_dir)
+        existed = run_dir.exists()
         run_dir.mkdir(parents=True, exist_ok=True)
     else:
         writable_dir(args.logdir, "--logdir")
-        run_dir = make_run_dir(args.logdir, scenario, cfg)
-    write_config(run_dir, scenario, cfg, command)
-    return Trainer(scenario, cfg, run_dir, **options)
+        run_dir, existed = make_run_dir(args.logdir, scenario, cfg), False
+    try:
+        write_config(run_dir, scenario, cfg, command)
+        return Trainer(scenario, cfg, run_dir, **options)
+    except BaseException:  # e.g. no memory for the games: leave no half-made run behind
+        (run_dir / "config.json").unlink(missing_ok=True)
+        if not existed and not any(run_dir.iterdir()):
+            run_dir.rmdir()
+        raise
 
 
 def write_config(run_dir: Path, scenario: Scenario, cfg: Train, command: str) -> None:

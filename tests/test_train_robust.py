@@ -159,3 +159,24 @@ def test_resume_with_a_damaged_config_json_rebuilds_it(tmp_path):
     assert main(["--resume", str(run_dir), "--updates", "3", "--no-progress"]) == 0
     config = json.loads((run_dir / "config.json").read_text())
     assert config["train"]["updates"] == 3 and config["scenario"]["name"] == "grid"
+
+
+def test_a_run_that_cannot_start_leaves_no_run_directory(tmp_path, monkeypatch, capsys):
+    def no_memory(*args, **kwargs):
+        raise MemoryError("no memory for the games")
+
+    monkeypatch.setattr("a2cm_phys.trainer.VectorEnv", no_memory)
+    assert main([*GRID, "--updates", "1", "--logdir", str(tmp_path / "logs")]) == 2
+    err = capsys.readouterr().err
+    assert "out of memory" in err and err.count("\n") == 1
+    assert not any((tmp_path / "logs").iterdir())
+
+
+def test_a_preset_gives_defaults_and_explicit_options_win(tmp_path):
+    run_dir = tmp_path / "run"
+    argv = ["--scenario", "grid", "--preset", "paper", "--updates", "1", "--lr", "0.01",
+            "--run-dir", str(run_dir), "--no-record", "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    train = json.loads((run_dir / "config.json").read_text())["train"]
+    assert train["num_envs"] == 1 and train["batch_size"] == 128  # the preset
+    assert train["updates"] == 1 and train["lr"] == 0.01  # explicit options
