@@ -34,11 +34,13 @@ from .cli import (
     Parser,
     UsageError,
     add_scenario_options,
+    positive_float,
     run_cli,
     scenario_from_args,
+    split_assignments,
     writable_dir,
 )
-from .config import Scenario, load_scenario
+from .config import Scenario, build, load_scenario, merge_overrides, to_dict
 from .envs.core import default_start
 from .solve import (
     GridModel,
@@ -49,7 +51,25 @@ from .solve import (
     policy_chain,
     solve_dp,
 )
+from .solve.best_response import (
+    TOLERANCE,
+    BestResponse,
+    Outcome,
+    evader_best_response,
+    evaluate_tables,
+    pursuers_best_response,
+)
 from .solve.evaluate import CaptureDistribution, PolicyChain
+from .solve.pursuer_step import check_size
+from .solve.sources import (
+    PURSUER_NAMES,
+    SourceError,
+    evader_source,
+    is_run,
+    pursuer_source,
+    run_scenario,
+)
+from .solve.tables import SCRIPTED_EVADERS, uniform_table
 
 SOLVER_VERSION = 1
 """Bumped whenever a change of the solver invalidates cached solutions."""
@@ -321,6 +341,104 @@ def _report(sol: OracleSolution) -> str:
     return "\n".join(lines)
 
 
+def _outcome_lines(out: Outcome, start: int, horizon: int, terminate: bool) -> list[str]:
+    lines = [f"    P(capture within {horizon} steps) {out.p_capture[start]:.6f}"]
+    if terminate:
+        lines[0] += f", P(ended by a collision) {out.p_end[start] - out.p_capture[start]:.6f}"
+    lines[0] += f", P(truncated) {1.0 - out.p_end[start]:.6f}"
+    stop = "all steps" if out.iterations == horizon else "stopped early"
+    lines.append(
+        f"    backward induction: {out.iterations} of {horizon} steps ({stop}, error bound "
+        f"{out.error_bound:.1e}), {out.kind} table, {out.seconds:.1f} s"
+    )
+    return lines
+
+
+def _scenario_line(sc: Scenario) -> str:
+    return (
+        f"oracle: {sc.name}: {sc.size}x{sc.size} grid, {sc.pursuers} pursuer(s), "
+        f"{sc.actions} actions, collisions {sc.collisions.mode}, max_steps {sc.max_steps}"
+    )
+
+
+def _evader_report(sc: Scenario, label: str, br: BestResponse, random: Outcome) -> str:
+    """The evader's best response against a pursuer policy, and the random evader's value."""
+    start, terminate = br.start, sc.collisions.mode == "terminate"
+    worst, typical = br.value_from_start, float(random.values[start])
+    what = "episode length (capture or collision)" if terminate else "capture time"
+    lines = [
+        _scenario_line(sc),
+        f"  pursuers: {label}",
+        "  evader's best response (maximises the expected episode length, truncated at "
+        f"{sc.max_steps}):",
+        f"    worst-case {what}: {worst:.6f}",
+        *_outcome_lines(br.outcome, start, sc.max_steps, terminate),
+        "  random evader for comparison:",
+        f"    expected {what}: {typical:.6f}",
+        *_outcome_lines(random, start, sc.max_steps, terminate),
+    ]
+    if typical > 0:
+        lines.append(f"  exploitability: the best response lasts {worst / typical:.2f}x as long")
+    return "\n".join(lines)
+
+
+def _pursuers_report(sc: Scenario, label: str, br: BestResponse) -> str:
+    """The pursuers' best response (the oracle against the evader) from the start."""
+    meta, terminate = br.meta, sc.collisions.mode == "terminate"
+    lines = [
+        _scenario_line(sc),
+        f"  evader: {label}",
+        "  pursuers' best response (the oracle solved against this evader):",
+        f"    expected capture time: {br.value_from_start:.6f}",
+        *_outcome_lines(br.outcome, br.start, sc.max_steps, terminate),
+    ]
+    if "sweeps" in meta:
+        lines.append(f"    oracle: {meta['sweeps']} sweeps, {meta['dp_seconds']:.1f} s")
+    if meta.get("losing_states"):
+        lines.append(f"    {meta['losing_states']:,} states from which capture cannot be forced")
+    return "\n".join(lines)
+
+
+def _best_response_scenario(args) -> Scenario:
+    """``--scenario`` with ``--set``; without ``--scenario``, a run directory's own."""
+    names = PURSUER_NAMES if args.best_response == "evader" else SCRIPTED_EVADERS
+    spec = args.pursuers if args.best_response == "evader" else args.evader
+    if args.scenario is None and spec is not None and is_run(spec, names):
+        trained = run_scenario(spec, names)
+        overrides, train_set = split_assignments(args.set)
+        if train_set:
+            raise UsageError(f"--set train.{next(iter(train_set))}: this command does not train")
+        return build(Scenario, merge_overrides(to_dict(trained), overrides), "--set")
+    args.scenario = args.scenario or "grid"
+    return scenario_from_args(args, train=False)
+
+
+def _best_response(args) -> int:
+    """``--best-response evader|pursuers``: solve, print, exit status."""
+    cache = {"cache_dir": args.cache_dir, "use_cache": not args.no_cache}
+    try:
+        sc = _best_response_scenario(args)
+        if args.best_response == "evader":
+            spec = args.pursuers or "oracle"
+            check_size(sc, {"oracle": "deterministic", "random": "product"}.get(spec, "general"))
+            source = pursuer_source(sc, spec, **cache)
+            br = evader_best_response(sc, source.table, args.tol)
+            random = evaluate_tables(sc, source.table, uniform_table(sc, 1), args.tol)
+            print(_evader_report(sc, source.label, br, random))
+            return 0
+        spec = args.evader or sc.evader
+        if spec not in SCRIPTED_EVADERS and spec == sc.evader:
+            raise UsageError(f"the scenario's evader is {spec!r}: name one with --evader")
+        check_size(sc, "deterministic")
+        source = evader_source(sc, spec, **cache)
+        solved = None if source.solution is None else source.solution.policy
+        br = pursuers_best_response(sc, source.table, args.tol, joint_policy=solved)
+        print(_pursuers_report(sc, source.label, br))
+        return 0
+    except (TooLargeError, UnsupportedError, SourceError) as err:
+        raise UsageError(str(err)) from None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Solve (or load) a grid scenario's optimum and print its statistics; exit code."""
     return run_cli(_main, argv)
@@ -331,13 +449,41 @@ def _main(argv: Sequence[str]) -> int:
         prog="python -m a2cm_phys.oracle",
         description="Exact optimal pursuit policy of a grid scenario (value iteration).",
     )
-    add_scenario_options(parser, default="grid", train=False)
+    add_scenario_options(parser, default=None, train=False)
     parser.add_argument("--cache-dir", type=Path, default=None, help="cache directory")
     parser.add_argument("--no-cache", action="store_true", help="neither read nor write cache")
+    parser.add_argument(
+        "--best-response",
+        choices=["evader", "pursuers"],
+        help="solve that team's exact best response to the other team's fixed policy",
+    )
+    parser.add_argument(
+        "--pursuers",
+        metavar="random|oracle|RUN_DIR",
+        help="with --best-response evader: the pursuers' policy (default oracle)",
+    )
+    parser.add_argument(
+        "--evader",
+        metavar="random|flee|static|RUN_DIR",
+        help="with --best-response pursuers: the evader's policy (default the scenario's)",
+    )
+    parser.add_argument(
+        "--tol",
+        type=positive_float,
+        default=TOLERANCE,
+        help=f"error bound that stops the backward induction early (default {TOLERANCE:g})",
+    )
     args = parser.parse_args(argv)
-    scenario = scenario_from_args(args, train=False)
     if args.cache_dir is not None and not args.no_cache:
         writable_dir(args.cache_dir, "--cache-dir")
+    if args.pursuers is not None and args.best_response != "evader":
+        raise UsageError("--pursuers goes with --best-response evader")
+    if args.evader is not None and args.best_response != "pursuers":
+        raise UsageError("--evader goes with --best-response pursuers")
+    if args.best_response:
+        return _best_response(args)
+    args.scenario = args.scenario or "grid"
+    scenario = scenario_from_args(args, train=False)
     try:
         sol = load_or_solve(scenario, args.cache_dir, use_cache=not args.no_cache)
     except (TooLargeError, UnsupportedError) as err:

@@ -301,7 +301,7 @@ def test_too_large_is_one_line_and_exit_2(capsys) -> None:
 def test_bad_scenarios_exit_2(argv: list[str], capsys) -> None:
     assert main([*argv, "--no-cache"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("oracle: ") and "\n" not in err
+    assert err.startswith("error: ") and "\n" not in err
 
 
 @pytest.mark.slow

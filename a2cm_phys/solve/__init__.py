@@ -2,26 +2,58 @@
 
 :mod:`.model` factorises one step of the game into per-pursuer tables and computes the
 Bellman backup over all joint states and joint actions with numpy; :mod:`.dp` runs value
-iteration on it (and, for the fleeing evader, finds the states from which capture cannot be
-forced); :mod:`.evaluate` replays a fixed policy through the real rule
+iteration on it (and, for evaders that might escape, finds the states from which capture
+cannot be forced); :mod:`.evaluate` replays a fixed policy through the real rule
 (:meth:`~a2cm_phys.envs.grid.GridRules.apply`) to evaluate it exactly. The command and the
 cached, playable policy live in :mod:`a2cm_phys.oracle`.
+
+Exploitability: :mod:`.tables` defines the policy tables over joint states both teams'
+fixed policies are given as; :mod:`.best_response` solves the evader's best response to a
+pursuer table (finite-horizon backward induction, one step by :mod:`.pursuer_step`) and
+the pursuers' best response to an evader table (the oracle against it); :mod:`.sources`
+builds tables from names (``random``, ``oracle``, ``flee``, ...) and run directories.
 """
 
 from __future__ import annotations
 
+from .best_response import (
+    BestResponse,
+    Outcome,
+    evader_best_response,
+    evaluate_tables,
+    pursuers_best_response,
+)
 from .dp import DPResult, solve_dp
 from .evaluate import PolicyChain, capture_distribution, evaluate_policy, policy_chain
 from .model import GridModel, TooLargeError, UnsupportedError
+from .tables import (
+    TablePolicy,
+    joint_observations,
+    joint_policy_table,
+    model_table,
+    scripted_evader_table,
+    uniform_table,
+)
 
 __all__ = [
+    "BestResponse",
     "DPResult",
     "GridModel",
+    "Outcome",
     "PolicyChain",
+    "TablePolicy",
     "TooLargeError",
     "UnsupportedError",
     "capture_distribution",
+    "evader_best_response",
     "evaluate_policy",
+    "evaluate_tables",
+    "joint_observations",
+    "joint_policy_table",
+    "model_table",
     "policy_chain",
+    "pursuers_best_response",
+    "scripted_evader_table",
     "solve_dp",
+    "uniform_table",
 ]

@@ -7,9 +7,11 @@ converges to the optimum wherever termination can be forced with probability one
 
 For the random and static evaders that is every state (pursuers can always walk to the
 evader; a random evader steps into a neighbouring pursuer with positive probability). A
-fleeing evader may be uncatchable (one pursuer on a small arena), so for it the states from
-which termination can be forced almost surely are found first, by the classic nested
-fixed point on the support of the transition law; the others get value ``-inf``.
+fleeing evader, or any evader law that skips some move somewhere
+(:attr:`~.model.GridModel.may_escape`), may be uncatchable (one pursuer on a small arena),
+so for it the states from which termination can be forced almost surely are found first,
+by the classic nested fixed point on the support of the transition law; the others get
+value ``-inf``.
 """
 
 from __future__ import annotations
@@ -109,7 +111,7 @@ def solve_dp(model: GridModel, tol: float | None = None, max_sweeps: int = 100_0
     tol = 1e-10 * abs(model.scenario.rewards.step) if tol is None else tol
     lose = safe = None
     qualitative = 0
-    if model.scenario.evader == "flee":
+    if model.may_escape:
         lose, safe, qualitative = winning_states(model)
         if not lose.any():
             lose = safe = None

@@ -25,6 +25,7 @@ import numpy as np
 from ..config import Scenario
 from ..envs.evader import STAY
 from ..envs.grid import GridRules
+from .tables import SCRIPTED_EVADERS, check_table, flee_law
 
 MAX_STATES = 20_000_000
 """Largest joint state space the solver attempts."""
@@ -62,8 +63,31 @@ def check_supported(scenario: Scenario) -> None:
         raise UnsupportedError("rewards.collision > 0 with collisions.mode='penalize' is unbounded")
 
 
+def free_table(scenario: Scenario, moves: np.ndarray) -> np.ndarray:
+    """``(C, A, C, nb)``: 1.0 where pursuer (cell, action) misses evader (cell, ``moves[b]``)."""
+    c, a, nb = scenario.size**2, scenario.actions, len(moves)
+    one = GridRules(dataclasses.replace(scenario, pursuers=1))
+    p, act, e, b = (g.ravel() for g in np.indices((c, a, c, nb)))
+    _, captured, _, _ = one.apply(np.stack([p, e]), act[:, None], np.asarray(moves)[b])
+    return 1.0 - captured.reshape(c, a, c, nb).astype(np.float64)
+
+
+def pair_table(scenario: Scenario) -> np.ndarray:
+    """``(C, A, C, A)``: collisions (0/1) of two pursuers' (cell, action) pairs."""
+    c, a = scenario.size**2, scenario.actions
+    two = GridRules(dataclasses.replace(scenario, pursuers=2))
+    pi, ai, pj, aj = (g.ravel() for g in np.indices((c, a, c, a)))
+    cells = np.stack([pi, pj, np.zeros_like(pi)])
+    _, _, collisions, _ = two.apply(cells, np.stack([ai, aj], 1), np.full(len(pi), STAY))
+    return collisions.reshape(c, a, c, a).astype(np.float64)
+
+
 class GridModel:
     """Per-agent transition and reward tables of one grid scenario, and the Bellman backup.
+
+    The evader plays the scenario's scripted policy, or ``evader_probs``, an evader policy
+    table (:mod:`.tables`) that replaces it: the oracle then solves the pursuers' best
+    response to that evader.
 
     Raises :class:`UnsupportedError` for scenarios it cannot solve and
     :class:`TooLargeError` when :meth:`memory_estimate` exceeds ``memory_budget`` or the
@@ -75,8 +99,14 @@ class GridModel:
         scenario: Scenario,
         memory_budget: float = MEMORY_BUDGET,
         max_states: int = MAX_STATES,
+        evader_probs: np.ndarray | None = None,
     ) -> None:
         check_supported(scenario)
+        if evader_probs is None and scenario.evader not in SCRIPTED_EVADERS:
+            raise UnsupportedError(
+                f"the oracle needs a scripted evader ({', '.join(SCRIPTED_EVADERS)}) or the "
+                f"evader's policy table, got evader={scenario.evader!r}"
+            )
         self.scenario = scenario
         self.rules = GridRules(scenario)
         self.n = n = scenario.pursuers
@@ -85,7 +115,13 @@ class GridModel:
         self.n_states = c ** (n + 1)
         self.n_joint = a**n
         self.shape = (c,) * (n + 1)
-        self.evader_moves = np.arange(a) if scenario.evader != "static" else np.array([STAY])
+        self.table = None if evader_probs is None else check_table(scenario, evader_probs, "evader")
+        if self.table is not None:  # the moves some state plays
+            self.evader_moves = np.flatnonzero(self.table[:, 0].any(axis=0))
+        elif scenario.evader == "static":
+            self.evader_moves = np.array([STAY])
+        else:
+            self.evader_moves = np.arange(a)
         self.terminate = scenario.collisions.mode == "terminate"
         rw = scenario.rewards
         self.collision_reward = rw.collision if scenario.collisions.mode != "off" else 0.0
@@ -103,15 +139,29 @@ class GridModel:
         move = self.rules.move.reshape(c, 5).astype(np.intp)
         self.pmove = move[:, :a]  # (C, A): pursuer cell, action -> next cell
         self.emove = move[:, self.evader_moves]  # (C, nb): evader cell, move -> next cell
-        self.free = self._free_table()
+        self.free = free_table(scenario, self.evader_moves)
         self.walls = self.rules.blocked.reshape(c, 5)[:, :a].astype(np.float64)
-        self.pair_collide = self._pair_table()
+        self.pair_collide = pair_table(scenario)
         self.weights = self._evader_weights()
         # Built on first use: loading a cached solution only needs the tables above.
         self._nocoll: list[np.ndarray] | None = None
         self._reward: list[np.ndarray] | None = None
 
     # ------------------------------------------------------------------ sizes and states
+
+    @property
+    def may_escape(self) -> bool:
+        """Whether the evader's law might keep capture from being forced somewhere.
+
+        Not for the uniform and static evaders: pursuers walk up to a static evader, and an
+        evader playing each of the ``actions`` moves with positive probability in every
+        state sometimes steps into (or swaps with) an adjacent pursuer. Any other law might.
+        """
+        if self.weights is None:
+            return False
+        own = self.evader_moves < self.n_actions
+        every = bool(np.all(self.weights[self.valid()][:, own] > 0))
+        return not (own.sum() == self.n_actions and every)
 
     @property
     def n_moves(self) -> int:
@@ -121,12 +171,13 @@ class GridModel:
     def memory_estimate(self) -> float:
         """Estimated peak bytes of a solve (value arrays, backup slices, policy replay)."""
         s, nb, n = self.n_states, len(self.evader_moves), self.n
-        state_arrays = s * 8 * 8 + (s * nb * 8 if self.scenario.evader == "flee" else 0)
+        law = self.table is not None or self.scenario.evader == "flee"  # not uniform
+        state_arrays = s * 8 * 8 + (s * nb * 8 if law else 0)
         chain = nb * s * self.n_actions ** (n - 1) * 8  # one pre-reduced tensor per evader move
         slices = 4 * self.chunk * (s // self.n_cells) * self.n_joint * 8
         full = s * self.n_joint
         extra = full * (8 if self._reward_is_array() else 0) + full * self.terminate
-        extra += full * (self.scenario.evader == "flee")  # safe-action mask
+        extra += full * law  # safe-action mask
         replay = s * nb * (8 + 8 + 4 * (n + 1) * 2)
         return float(state_arrays + chain + slices + extra + replay)
 
@@ -150,39 +201,14 @@ class GridModel:
 
     # ------------------------------------------------------------------ tables
 
-    def _free_table(self) -> np.ndarray:
-        """``(C, A, C, nb)``: 1.0 where pursuer (cell, action) misses evader (cell, move)."""
-        c, a, nb = self.n_cells, self.n_actions, self.n_moves
-        one = GridRules(dataclasses.replace(self.scenario, pursuers=1))
-        p, act, e, b = (g.ravel() for g in np.indices((c, a, c, nb)))
-        _, captured, _, _ = one.apply(np.stack([p, e]), act[:, None], self.evader_moves[b])
-        return 1.0 - captured.reshape(c, a, c, nb).astype(np.float64)
-
-    def _pair_table(self) -> np.ndarray:
-        """``(C, A, C, A)``: collisions (0/1) of two pursuers' (cell, action) pairs."""
-        c, a = self.n_cells, self.n_actions
-        two = GridRules(dataclasses.replace(self.scenario, pursuers=2))
-        pi, ai, pj, aj = (g.ravel() for g in np.indices((c, a, c, a)))
-        cells = np.stack([pi, pj, np.zeros_like(pi)])
-        _, _, collisions, _ = two.apply(cells, np.stack([ai, aj], 1), np.full(len(pi), STAY))
-        return collisions.reshape(c, a, c, a).astype(np.float64)
-
     def _evader_weights(self) -> np.ndarray | None:
-        """``(S, nb)`` probabilities of the fleeing evader's moves; ``None`` when uniform.
-
-        Flee (SPEC §1): the moves maximising the Manhattan distance from the evader's cell
-        after the move to the nearest pursuer's cell at the start of the step, each equally
-        likely. Two moves that both bump into a wall are two moves, as in the core.
-        """
-        if self.scenario.evader != "flee":
-            return None
-        xy = self.rules.cell_xy
-        cells = self.decode(np.arange(self.n_states))
-        cand = xy[self.emove[cells[-1]]]  # (S, nb, 2)
-        pursuers = xy[cells[:-1]]  # (N, S, 2)
-        dist = np.abs(cand[None] - pursuers[:, :, None, :]).sum(-1).min(0)  # (S, nb)
-        best = dist == dist.max(axis=1, keepdims=True)
-        return best / best.sum(axis=1, keepdims=True)
+        """``(S, nb)`` probabilities of the evader's moves; ``None`` when uniform."""
+        if self.table is not None:
+            weights = self.table[:, 0, self.evader_moves]
+            return None if np.all(weights == 1.0 / self.n_moves) else weights
+        if self.scenario.evader == "flee":
+            return flee_law(self.scenario)
+        return None
 
     # ------------------------------------------------------------------ the backup
 

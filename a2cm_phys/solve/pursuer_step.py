@@ -1,0 +1,272 @@
+"""One step of the grid game under a fixed pursuer policy table, for every joint state and
+every evader move: the operator the finite-horizon dynamic programming of
+:mod:`.best_response` applies up to ``max_steps`` times.
+
+:meth:`PursuerStep.expect` maps an array ``x`` over joint states (with trailing columns),
+zero on states where a pursuer stands on the evader, to
+``G[s, b] = Σ_a P(a | s) · [the episode goes on] · x[s'(s, a, b)]``, ``a`` the pursuers'
+joint action, drawn from the table, ``b`` the evader's move and ``s'`` the next state.
+Three implementations, picked by the table:
+
+- *deterministic* (every row one-hot, e.g. the oracle): the next state of every
+  (state, evader move) comes from :meth:`~a2cm_phys.envs.grid.GridRules.apply` itself,
+  so a step is one gather of ``S · nb`` values.
+- *product* (the same rows in every state, e.g. uniformly random pursuers, and no
+  collision termination): the sum over joint actions factorises per pursuer. Pursuer
+  ``i``'s move, with its probabilities and its chance of missing the evader
+  (:func:`~.model.free_table`), is a ``C × C`` matrix per evader cell; a step is ``N``
+  batched matrix products per evader move.
+- *general* (e.g. learned actors): a pursuer's probabilities depend on every agent's
+  cell, so nothing factorises: a step gathers ``x`` at the ``A^N`` next states of every
+  state and weighs them by the joint probabilities. The next states' indices do not
+  depend on the evader's move once ``x`` is shifted along the evader's axis, so one index
+  array serves all moves. A pursuer landing on the evader's cell lands on a state where
+  ``x`` is zero; swaps and (``terminate`` mode) collisions are masked out of the weights.
+
+The product kind's tables and the collision masks come from :meth:`GridRules.apply` on
+every one- and two-pursuer configuration; the tests compare the three kinds with each
+other and with plain enumeration of the rules.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from ..config import Scenario
+from ..envs.grid import GridRules
+from .model import (
+    MAX_STATES,
+    MEMORY_BUDGET,
+    TooLargeError,
+    UnsupportedError,
+    free_table,
+    pair_table,
+)
+from .tables import check_table, n_states, state_cells, valid_states
+
+Kind = Literal["auto", "deterministic", "product", "general"]
+
+COLUMNS = 3
+"""Most columns of ``x`` the dynamic programming carries (steps, capture, episode end)."""
+
+
+def pick_kind(scenario: Scenario, table: np.ndarray) -> str:
+    """The cheapest exact implementation for a checked pursuer table (see the module)."""
+    rows = table[valid_states(scenario)]
+    if np.all((rows == 0.0) | (rows == 1.0)):
+        return "deterministic"
+    if scenario.collisions.mode != "terminate" and np.all(rows == rows[:1]):
+        return "product"
+    return "general"
+
+
+def memory_estimate(scenario: Scenario, kind: str, moves: int) -> float:
+    """Estimated peak bytes of a dynamic programming run with ``kind`` (tables included)."""
+    s, n, a = n_states(scenario), scenario.pursuers, scenario.actions
+    base = s * n * a * 8 * 2 + s * moves * COLUMNS * 8 * 3 + s * (n + 1) * 8
+    if kind == "deterministic":
+        return float(base + s * moves * 24)
+    if kind == "product":
+        return float(base + 3 * s * COLUMNS * 8)
+    full = s * a**n  # (state, joint action) pairs: indices, weights, gathered values
+    swaps = full * 8 * moves * min(1.0, 2.0 * n / scenario.size**2)
+    return float(base + full * (8 + 8 + 8 + 2) + swaps)
+
+
+def check_size(
+    scenario: Scenario,
+    kind: str = "general",
+    moves: int | None = None,
+    memory_budget: float = MEMORY_BUDGET,
+    max_states: int = MAX_STATES,
+) -> None:
+    """Raise unless a best response of this ``kind`` on the scenario's grid is within the
+    limits (:class:`~.model.UnsupportedError` outside grid mode, else
+    :class:`~.model.TooLargeError` naming the limit). Cheap: call it before building tables.
+    """
+    if scenario.mode != "grid":
+        raise UnsupportedError(f"best responses are exact on grids only, got {scenario.mode!r}")
+    s, n = n_states(scenario), scenario.pursuers
+    size = f"{scenario.size}x{scenario.size} arena with {n} pursuer(s)"
+    if s > max_states:
+        raise TooLargeError(
+            f"{size} is too large for an exact best response: {s:,} joint states "
+            f"(limit {max_states:,})"
+        )
+    need = memory_estimate(scenario, kind, moves or scenario.actions + 1)
+    if need > memory_budget:
+        raise TooLargeError(
+            f"{size} is too large for an exact best response against a {kind} policy "
+            f"table: {s:,} joint states need ~{need / 2**30:.1f} GiB (limit "
+            f"{memory_budget / 2**30:.1f} GiB)"
+        )
+
+
+class PursuerStep:
+    """The expectation over the pursuers' table of one step, from every joint state.
+
+    ``moves`` are the evader's moves ``b`` (action numbers; 4 is stay). Raises
+    :class:`~.model.TooLargeError` when the arena is beyond ``max_states`` joint states
+    or the estimated memory beyond ``memory_budget``, :class:`~.model.UnsupportedError`
+    outside grid mode and ``ValueError`` for a malformed table.
+
+    ``p_capture[s, b]`` and ``p_end[s, b]`` are the probabilities that the step from
+    ``s`` with evader move ``b`` captures the evader, and that it ends the episode
+    (capture, or a pursuer collision in ``terminate`` mode).
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        pursuer_probs: np.ndarray,
+        moves: np.ndarray,
+        kind: Kind = "auto",
+        memory_budget: float = MEMORY_BUDGET,
+        max_states: int = MAX_STATES,
+    ) -> None:
+        check_size(scenario, "deterministic", len(moves), memory_budget, max_states)
+        self.scenario = scenario
+        self.n, self.a, self.c = scenario.pursuers, scenario.actions, scenario.size**2
+        self.n_states = n_states(scenario)
+        self.shape = (self.c,) * (self.n + 1)
+        self.moves = np.asarray(moves, dtype=np.int64)
+        self.terminate = scenario.collisions.mode == "terminate"
+        self.table = check_table(scenario, pursuer_probs, "pursuers")
+        self.kind = pick_kind(scenario, self.table) if kind == "auto" else kind
+        if self.kind == "product" and self.terminate:
+            raise ValueError("the product kind cannot end episodes on collisions")
+        check_size(scenario, self.kind, len(self.moves), memory_budget, max_states)
+        self.valid = valid_states(scenario)
+        move = GridRules(scenario).move.reshape(self.c, 5).astype(np.intp)
+        self.pmove = move[:, : self.a]
+        self.emove = move[:, self.moves]
+        if self.kind == "deterministic":
+            self._build_chain()
+            return
+        if self.kind == "product":
+            self._build_matrices()
+        else:
+            self._build_gather()
+        ones = self.valid.astype(np.float64)[:, None]  # 1 where the episode goes on
+        self.p_capture = self.p_end = 1.0 - self.expect(ones)[..., 0]
+        if self.terminate:  # now also end the episode on collisions
+            self.weight *= self.nocoll
+            self.p_end = 1.0 - self.expect(ones)[..., 0]
+
+    # ------------------------------------------------------------------ deterministic
+
+    def _build_chain(self) -> None:
+        """Replay every (state, evader move) through ``GridRules.apply``."""
+        cells = state_cells(self.scenario)
+        actions = self.table.argmax(-1)  # (S, N)
+        rules = GridRules(self.scenario)
+        s, nb = self.n_states, len(self.moves)
+        self.next = np.empty((s, nb), dtype=np.int64)
+        self.p_capture = np.empty((s, nb))
+        self.p_end = np.empty((s, nb))
+        for b, move in enumerate(self.moves):
+            new, captured, collisions, _ = rules.apply(cells.copy(), actions, np.full(s, move))
+            self.next[:, b] = np.ravel_multi_index(tuple(new), self.shape)
+            self.p_capture[:, b] = captured
+            self.p_end[:, b] = captured | (self.terminate & (collisions > 0))
+        self.cont = 1.0 - self.p_end
+
+    # ------------------------------------------------------------------ product
+
+    def _build_matrices(self) -> None:
+        """``M[i, b, e, p, q]``: P(pursuer ``i`` moves from ``p`` to ``q`` and misses the
+        evader leaving ``e`` by move ``b``), the same in every state."""
+        c, a, n = self.c, self.a, self.n
+        rho = self.table[np.argmax(self.valid)]  # (N, A)
+        free = free_table(self.scenario, self.moves)  # (p, a, e, b)
+        self.matrices = np.zeros((n, len(self.moves), c, c, c))  # (i, b, e, p, q)
+        p = np.arange(c)
+        for i in range(n):
+            for act in range(a):  # p -> q is one-to-one for one action: no repeated pairs
+                w = rho[i, act] * free[:, act]  # (p, e, b)
+                self.matrices[i][:, :, p, self.pmove[:, act]] += w.transpose(2, 1, 0)
+
+    def _product(self, x: np.ndarray, b: int) -> np.ndarray:
+        """One evader move: the evader's axis first, then one matrix product per pursuer
+        (broadcast over the evader's cell and the pursuers before it: no transposes)."""
+        c, n, m = self.c, self.n, x.shape[1]
+        y = x.reshape(-1, c, m)[:, self.emove[:, b]].transpose(1, 0, 2)  # (e, q…, m)
+        y = np.ascontiguousarray(y)
+        for i in range(n):
+            y = np.matmul(self.matrices[i, b][:, None], y.reshape(c, c**i, c, -1))
+        return y.reshape(c, -1, m).transpose(1, 0, 2).reshape(self.n_states, m)
+
+    # ------------------------------------------------------------------ general
+
+    def _build_gather(self) -> None:
+        """Next-state indices and joint probabilities of every (state, joint action)."""
+        c, a, n, s = self.c, self.a, self.n, self.n_states
+        cells = state_cells(self.scenario)
+        joint = (s,) + (a,) * n
+        index = np.broadcast_to(cells[-1].reshape((s,) + (1,) * n), joint).copy()
+        weight = np.ones(joint)
+        for i in range(n):
+            shape = (s,) + (1,) * i + (a,) + (1,) * (n - 1 - i)
+            index += (self.pmove[cells[i]] * c ** (n - i)).reshape(shape)
+            weight *= self.table[:, i, :].reshape(shape)
+        self.index = index.reshape(s, -1)
+        self.weight = weight.reshape(s, -1)
+        self.buffer = np.empty(self.index.shape)
+        # Swaps: pursuer i moves onto the evader's cell e as the evader moves onto p_i.
+        # A capture that the gather cannot see: those (state, joint action) entries are
+        # subtracted again, sparsely (they need an adjacent pursuer and the move onto it).
+        self.swaps: list[tuple[np.ndarray, np.ndarray]] = []
+        for b in range(len(self.moves)):
+            target = self.emove[cells[-1], b]
+            rows = np.flatnonzero(np.any(cells[:-1] == target, axis=0) & (target != cells[-1]))
+            hit = np.zeros((len(rows),) + (a,) * n, dtype=bool)
+            for i in range(n):
+                swap = (cells[i, rows] == target[rows])[:, None] & (
+                    self.pmove[cells[i, rows]] == cells[-1, rows, None]
+                )  # (rows, A)
+                hit |= swap.reshape((len(rows),) + (1,) * i + (a,) + (1,) * (n - 1 - i))
+            r, j = np.nonzero(hit.reshape(len(rows), a**n))
+            self.swaps.append((rows[r], rows[r] * a**n + j))
+        self.nocoll = None
+        if self.terminate:
+            pair = pair_table(self.scenario) == 0
+            ok = np.ones(joint, dtype=bool)
+            for i in range(n):
+                for k in range(i + 1, n):
+                    shape_i = (s,) + (1,) * i + (a,) + (1,) * (n - 1 - i)
+                    shape_k = (s,) + (1,) * k + (a,) + (1,) * (n - 1 - k)
+                    ai = np.arange(a).reshape(shape_i[1:])
+                    ak = np.arange(a).reshape(shape_k[1:])
+                    pi = cells[i].reshape((s,) + (1,) * n)
+                    pk = cells[k].reshape((s,) + (1,) * n)
+                    ok &= pair[pi, ai, pk, ak]
+            self.nocoll = ok.reshape(s, -1)
+
+    def _general(self, x: np.ndarray, b: int, out: np.ndarray) -> None:
+        """One evader move: shift ``x`` along the evader's axis, gather, weigh."""
+        shifted = np.take(x.reshape(-1, self.c, x.shape[1]), self.emove[:, b], axis=1)
+        shifted = shifted.reshape(self.n_states, -1)
+        rows, flat = self.swaps[b]
+        weight = self.weight.ravel()[flat]
+        for col in range(x.shape[1]):
+            values = np.ascontiguousarray(shifted[:, col])
+            np.take(values, self.index, mode="clip", out=self.buffer)
+            out[:, col] = np.einsum("sj,sj->s", self.weight, self.buffer)
+            swapped = weight * self.buffer.ravel()[flat]
+            out[:, col] -= np.bincount(rows, weights=swapped, minlength=self.n_states)
+
+    # ------------------------------------------------------------------ the operator
+
+    def expect(self, x: np.ndarray) -> np.ndarray:
+        """``G (S, nb, m)`` of ``x (S, m)`` (``x`` zero where a pursuer is on the evader)."""
+        if self.kind == "deterministic":
+            return self.cont[..., None] * x[self.next]
+        out = np.empty((self.n_states, len(self.moves), x.shape[1]))
+        for b in range(len(self.moves)):
+            if self.kind == "product":
+                out[:, b] = self._product(x, b)
+            else:
+                self._general(x, b, out[:, b])
+        return out
