@@ -10,7 +10,7 @@ from test_grid_rules import CASES, DOWN, LEFT, RIGHT, STAY, UP
 from a2cm_phys import make_env
 from a2cm_phys.config import load_scenario
 from a2cm_phys.envs.core import evader_reward
-from a2cm_phys.envs.factory import make_core
+from a2cm_phys.envs.factory import make_core, make_evader
 from a2cm_phys.envs.grid import GridCore
 from a2cm_phys.envs.physics import PhysicsCore
 from a2cm_phys.envs.vector import VectorEnv
@@ -336,6 +336,36 @@ def test_invalid_batched_evader_actions_change_no_game(name, evader, message):
         env.step(pursuers, evader)
     assert (env.core.t == 0).all()
     np.testing.assert_array_equal(env.core.positions(), before)
+
+
+def test_a_core_plays_the_evader_policy_it_is_given():
+    """Both cores take an injected policy: a flee evader given to a core of the random
+    scenario plays exactly as the flee scenario's own evader (positions included)."""
+    for name in ("grid", "phys"):
+        flee = load_scenario(f"{name}_flee")
+        core_type = GridCore if flee.mode == "grid" else PhysicsCore
+        r = flee.physics.evader_radius  # the evader's centre stays in [low, high]
+        low, high = (0, flee.size - 1) if flee.mode == "grid" else (r, flee.size - r)
+        policy = make_evader(flee, 3, low, high)
+        given = core_type(load_scenario(name, {"max_steps": 20}), 3, evader=policy)
+        own = core_type(load_scenario(f"{name}_flee", {"max_steps": 20}), 3)
+        (pos_a, ev_a), (pos_b, ev_b) = (rollout_scripted(core) for core in (given, own))
+        np.testing.assert_array_equal(pos_a, pos_b)
+        np.testing.assert_array_equal(ev_a, ev_b)
+
+
+def rollout_scripted(core, steps=40):
+    """Positions and evader actions of ``steps`` random pursuer moves, restarting games."""
+    rng = np.random.default_rng(0)
+    core.reset(np.arange(core.num_envs), np.arange(core.num_envs, dtype=np.uint64))
+    positions, evader = [], []
+    for _ in range(steps):
+        out = core.step(rng.integers(0, 4, (core.num_envs, core.scenario.pursuers)))
+        positions.append(core.positions())
+        evader.append(out.evader_action)
+        done = np.flatnonzero(out.terminated | out.truncated)
+        core.reset(done, done.astype(np.uint64) + np.uint64(9))
+    return np.stack(positions), np.stack(evader)
 
 
 def test_the_static_evader_still_stays_with_four_actions():
