@@ -30,6 +30,8 @@ EvaderReward = Literal["zero_sum", "survival"]
 CollisionMode = Literal["off", "terminate", "penalize"]
 Algo = Literal["a2c", "a2cm"]
 Control = Literal["discrete", "continuous"]
+Optimizer = Literal["rmsprop", "adam"]
+Schedule = Literal["constant", "linear"]
 
 DEFAULT_DT = {"discrete": 1.0, "continuous": 0.1}
 """The control period ``physics.dt`` (s) of each control type when a scenario omits it."""
@@ -196,6 +198,18 @@ class Train:
     device: str = "cpu"
     threads: int = 1
     workers: int = 1  # physics mode: processes stepping the games (grid ignores it)
+    optimizer: Optimizer = "rmsprop"
+    adam_eps: float = 1e-5
+    gae_lambda: float = 1.0
+    normalize_advantages: bool = False
+    value_norm: bool = False
+    split_rewards: bool = False
+    balance_rewards: bool = True
+    log_std_init: float = 0.0
+    lr_schedule: Schedule = "constant"
+    constrain_collisions: bool = False
+    collision_budget: float = 0.0
+    lagrange_lr: float = 1.0
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of the first impossible value."""
@@ -218,6 +232,19 @@ class Train:
                 raise _KeyError(key, f"must be >= 0, got {getattr(self, key)}")
         if not 0.0 <= self.rmsprop_alpha < 1.0:
             raise _KeyError("rmsprop_alpha", f"must be in [0, 1), got {self.rmsprop_alpha}")
+        if not 0.0 <= self.gae_lambda <= 1.0:
+            raise _KeyError("gae_lambda", f"must be in [0, 1], got {self.gae_lambda}")
+        if not self.adam_eps > 0:
+            raise _KeyError("adam_eps", f"must be > 0, got {self.adam_eps}")
+        for key in ("collision_budget", "lagrange_lr"):
+            if getattr(self, key) < 0:
+                raise _KeyError(key, f"must be >= 0, got {getattr(self, key)}")
+        if self.constrain_collisions and not (self.split_rewards and self.value_norm):
+            raise _KeyError(
+                "constrain_collisions",
+                "needs split_rewards = true and value_norm = true (the constraint is the"
+                " collision component, valued and scaled on its own)",
+            )
 
     @property
     def steps_per_env(self) -> int:
@@ -351,6 +378,10 @@ def _coerce(value: Any, hint: Any, key: str) -> Any:
     if hint is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise _KeyError(key, f"must be an integer, got {value!r}")
+        return value
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise _KeyError(key, f"must be true or false, got {value!r}")
         return value
     if hint is str and not isinstance(value, str):
         raise _KeyError(key, f"must be a string, got {value!r}")

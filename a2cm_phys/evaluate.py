@@ -1,8 +1,13 @@
-"""Play a trained (or baseline) policy: ``python -m a2cm_phys.evaluate RUN_DIR --episodes N``.
+"""Play pursuers against an evader and report: ``python -m a2cm_phys.evaluate RUN --greedy``.
 
-Reports the mean, median and 95th percentile of the episode length (the capture steps when
-every episode ends in a capture), the same over captured episodes only, the capture rate
-and the collisions per episode, each with a seeded bootstrap 95% confidence interval.
+The pursuers and the evader are chosen apart, each a run directory or a named policy
+(``--pursuers random|pursuit|oracle|RUN``, ``--evader random|flee|static|RUN``; see
+:mod:`a2cm_phys.policies`). The report gives the mean, median and 95th percentile of the
+capture steps, the capture rate, the collisions per episode and the return under the
+scenario's raw reward, each with a seeded bootstrap 95% confidence interval, and beside
+them a reference: on grids the oracle solves, the exact optimum and the gap to it; in
+physics mode a reference policy played on the same episodes (``--reference``).
+``--cross-play`` plays every pairing of comma-separated lists of pursuers and evaders.
 
 Episodes are played in several games at once without favouring short ones: each game plays
 a fixed quota of consecutive episodes (episodes it finishes after its quota are ignored).
@@ -25,9 +30,29 @@ from .algos import ActorCritic, make_model
 from .cli import SEED, Parser, add_scenario_options, int_range, run_cli, scenario_from_args
 from .config import ConfigError, Scenario, build, load_train
 from .envs.vector import VectorEnv
+from .policies import (
+    EVADER_POLICIES,
+    PURSUER_POLICIES,
+    Matchup,
+    matchup,
+    pursuer_policy,
+    random_policy,
+)
 from .rollout import Policy
 from .stats import describe
+from .teams import evader_train_cfg
 from .trainer import policy_rng
+
+__all__ = [
+    "EvalResult",
+    "TrainedRun",
+    "load_run",
+    "load_trained",
+    "main",
+    "model_policy",
+    "play",
+    "random_policy",
+]
 
 
 @dataclass
@@ -54,9 +79,15 @@ class EvalResult:
 
 
 def play(
-    scenario: Scenario, policy: Policy, episodes: int, num_envs: int = 16, seed: int = 0
+    scenario: Scenario,
+    policy: Policy,
+    episodes: int,
+    num_envs: int = 16,
+    seed: int = 0,
+    evader: Policy | None = None,
 ) -> EvalResult:
-    """Play ``episodes`` episodes of ``policy`` in up to ``num_envs`` games, seeded."""
+    """Play ``episodes`` episodes of ``policy`` in up to ``num_envs`` games, seeded; a
+    learned evader's ``evader`` policy acts where the scenario's evader is learned."""
     num_envs = max(1, min(num_envs, episodes))
     env = VectorEnv(scenario, num_envs)
     obs, rng = env.reset(seed), policy_rng(seed)
@@ -65,7 +96,11 @@ def play(
     per_env: list[list] = [[] for _ in range(num_envs)]
     remaining = episodes
     while remaining:
-        step = env.step(policy(obs, rng), validate=False)
+        actions = policy(obs, rng)
+        if evader is None:
+            step = env.step(actions, validate=False)
+        else:
+            step = env.step(actions, evader(obs, rng)[:, 0], validate=False)
         obs = step.obs
         for ep in step.episodes:
             if len(per_env[ep.env]) < quota[ep.env]:
@@ -82,14 +117,45 @@ def play(
     )
 
 
-def load_trained(path: str | Path) -> tuple[Scenario, ActorCritic]:
-    """The scenario and trained model of a run directory or checkpoint file."""
-    state = checkpoint.load(path)
+@dataclass(frozen=True)
+class TrainedRun:
+    """The scenario and trained models of a run: the pursuers', and a learned evader's."""
+
+    scenario: Scenario
+    pursuers: ActorCritic
+    evader: ActorCritic | None
+
+
+def load_run(path: str | Path) -> TrainedRun:
+    """The trained models of a run directory or checkpoint file (a :class:`ConfigError`
+    naming the path if it is not one)."""
+    try:
+        state = checkpoint.load(path)
+    except (OSError, ValueError) as err:
+        raise ConfigError(str(err)) from None
     scenario = build(Scenario, state["scenario"], f"{path} (checkpoint)")
     cfg = load_train({**state["train"], "device": "cpu"}, f"{path} (checkpoint)")
-    model = make_model(cfg, scenario)
-    model.load_state_dict(state["learner"]["model"])
-    return scenario, model
+    pursuers = make_model(cfg, scenario)
+    pursuers.load_state_dict(state["learner"]["model"])
+    evader = None
+    if state.get("evader_learner") is not None:
+        evader = make_model(evader_train_cfg(cfg), scenario, n_agents=1)
+        evader.load_state_dict(state["evader_learner"]["model"])
+    return TrainedRun(scenario, pursuers, evader)
+
+
+def load_trained(path: str | Path) -> tuple[Scenario, ActorCritic]:
+    """The scenario and trained pursuers of a run directory or checkpoint file."""
+    run = load_run(path)
+    return run.scenario, run.pursuers
+
+
+def load_trained_evader(path: str | Path) -> tuple[Scenario, ActorCritic]:
+    """The scenario and trained (learned) evader of a self-play run."""
+    run = load_run(path)
+    if run.evader is None:
+        raise ConfigError(f"{path}: the run has no learned evader")
+    return run.scenario, run.evader
 
 
 def model_policy(model: ActorCritic, greedy: bool = False) -> Policy:
@@ -97,28 +163,57 @@ def model_policy(model: ActorCritic, greedy: bool = False) -> Policy:
     return lambda obs, rng: model.act(obs, rng, greedy=greedy)
 
 
-def random_policy(scenario: Scenario) -> Policy:
-    """Uniformly random actions for every pursuer (the baseline)."""
-    shape = (scenario.pursuers,)
-    return lambda obs, rng: rng.integers(0, scenario.actions, size=(len(obs), *shape))
+# ---------------------------------------------------------------------- references
 
 
-def oracle_policy(scenario: Scenario) -> Policy:
-    """The exact optimum of a grid scenario (:class:`a2cm_phys.oracle.OraclePolicy`)."""
-    from .oracle import OraclePolicy
+def optimum(scenario: Scenario) -> dict[str, float] | None:
+    """The exact optimum of a grid scenario from its default start (expected capture steps
+    and return under the raw reward), or ``None`` where the oracle does not solve it."""
+    if scenario.mode != "grid" or scenario.evader == "learned":
+        return None
+    from .oracle import load_or_solve
+    from .solve import TooLargeError, UnsupportedError
 
-    oracle = OraclePolicy(scenario)
-    return lambda obs, rng: oracle.act(obs)
+    try:
+        sol = load_or_solve(scenario)
+    except (TooLargeError, UnsupportedError):
+        return None
+    start = sol.start_positions()
+    return {
+        "capture_steps": float(sol.expected_capture_steps(start)),
+        "return": float(sol.optimal_return(start)),
+    }
+
+
+def reference_report(
+    scenario: Scenario, name: str, episodes: int, num_envs: int, seed: int
+) -> dict[str, Any] | None:
+    """The reference beside a result: the exact optimum on grids the oracle solves, else
+    the named pursuer policy played on the same episodes (``None`` for ``none``)."""
+    if name == "none":
+        return None
+    best = optimum(scenario) if name == "oracle" else None
+    if best is not None:
+        return {"policy": "optimum (exact oracle)", "exact": True, **best}
+    try:
+        policy = pursuer_policy(name, scenario)
+    except ConfigError as err:  # e.g. an arena too large for the oracle: no reference
+        return {"policy": name, "unavailable": str(err)}
+    result = play(scenario, policy, episodes, num_envs, seed)
+    return {"policy": f"{name} (played)", "exact": False, **result.report(seed)}
+
+
+# ---------------------------------------------------------------------- formatting
 
 
 def format_report(report: dict[str, Any], title: str) -> str:
-    """The report as an aligned text table."""
-    lines = [title, f"{'':24}{'value':>10}  95% CI"]
+    """The report as an aligned text table, with the reference and the gap to it."""
+    lines = [title, f"{'':24}{'value':>12}  95% CI"]
 
     def row(name: str, s: dict[str, float], pct: bool = False) -> None:
-        k, fmt = (100.0, "{:.1f}%") if pct else (1.0, "{:.3f}")
+        k, fmt = (100.0, "{:.1f}%") if pct else (1.0, "{:,.3f}")
         v, lo, hi = (fmt.format(k * s[key]) for key in ("value", "lo", "hi"))
-        lines.append(f"{name:24}{v:>10}  [{lo}, {hi}]")
+        lines.append(f"{name:24}{v:>12}  [{lo}, {hi}]")
 
     sections = [("capture_steps", "capture steps"), ("length", "episode length")]
     if report["capture_rate"]["value"] == 1.0:  # every episode is a capture: same numbers
@@ -129,71 +224,160 @@ def format_report(report: dict[str, Any], title: str) -> str:
     row("capture rate", report["capture_rate"], pct=True)
     row("collisions / episode", report["collisions_per_episode"])
     row("return", report["return"])
-    lines.append(f"{'episodes':24}{report['episodes']:>10}  (truncated: {report['truncated']})")
+    lines.append(f"{'episodes':24}{report['episodes']:>12}  (truncated: {report['truncated']})")
+    ref = report.get("reference")
+    if ref and "unavailable" in ref:
+        lines.append(f"reference ({ref['policy']}) unavailable: {ref['unavailable']}")
+    elif ref:
+        steps = report["capture_steps"]["mean"]["value"]
+        ret = report["return"]["value"]
+        if ref["exact"]:
+            ref_steps, ref_ret = ref["capture_steps"], ref["return"]
+            lines.append(f"{ref['policy']}: capture steps {ref_steps:.3f}, return {ref_ret:,.3f}")
+        else:
+            ref_steps = ref["capture_steps"]["mean"]["value"]
+            ref_ret = ref["return"]["value"]
+            coll = ref["collisions_per_episode"]["value"]
+            lines.append(
+                f"reference, {ref['policy']}: capture steps {ref_steps:.3f}, return "
+                f"{ref_ret:,.3f}, collisions / episode {coll:.4f}"
+            )
+        lines.append(
+            f"gap to the reference: capture steps {100 * (steps / ref_steps - 1):+.1f}%,"
+            f" return {ret / ref_ret:.3f}× the reference's"
+        )
     return "\n".join(lines)
+
+
+def format_cross_play(rows: list[dict[str, Any]]) -> str:
+    """The cross-play table (Markdown): one row per pairing."""
+    lines = [
+        "| pursuers | evader | capture steps (mean, 95% CI) | capture rate | collisions / ep |",
+        "|---|---|---|---|---|",
+    ]
+    for r in rows:
+        s, c, k = r["capture_steps"]["mean"], r["capture_rate"], r["collisions_per_episode"]
+        lines.append(
+            f"| {r['pursuers']} | {r['evader']} | {s['value']:.3f} [{s['lo']:.3f}, {s['hi']:.3f}]"
+            f" | {100 * c['value']:.1f}% | {k['value']:.4f} [{k['lo']:.4f}, {k['hi']:.4f}] |"
+        )
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------- command line
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m a2cm_phys.evaluate`` argument parser."""
     p = Parser(
         prog="python -m a2cm_phys.evaluate",
-        description="Play a trained policy (or a baseline) and report capture statistics.",
+        description="Play pursuers against an evader and report capture statistics.",
     )
-    p.add_argument("run", nargs="?", help="run directory or checkpoint file")
+    p.add_argument("run", nargs="?", help="run directory or checkpoint file (the pursuers)")
+    p.add_argument(
+        "--pursuers",
+        help=f"a run directory or {'|'.join(PURSUER_POLICIES)} (default: RUN); with"
+        " --cross-play a comma-separated list",
+    )
+    p.add_argument(
+        "--evader",
+        help=f"a run directory with a learned evader or {'|'.join(EVADER_POLICIES)}"
+        " (default: the scenario's); with --cross-play a comma-separated list",
+    )
+    p.add_argument(
+        "--policy",
+        choices=["trained", *PURSUER_POLICIES],
+        help="the pursuers as a named policy (same as --pursuers NAME; trained: RUN)",
+    )
+    p.add_argument(
+        "--reference",
+        choices=["oracle", "pursuit", "random", "none"],
+        help="what to show beside the result (default: the exact optimum on grids the"
+        " oracle solves; in physics mode the pursuit policy, played)",
+    )
+    p.add_argument("--cross-play", action="store_true", help="every pursuers × evader pairing")
     p.add_argument("--episodes", type=int_range(1, 100_000_000), default=1000)
     p.add_argument("--greedy", action="store_true", help="most probable action, no sampling")
     p.add_argument("--seed", type=SEED, default=0)
     p.add_argument("--num-envs", type=int_range(1, 65_536), default=16, help="games at once")
-    p.add_argument("--policy", choices=["trained", "random", "oracle"], default="trained")
-    add_scenario_options(
-        p, train=False, scenario_help="scenario for --policy random/oracle without a run"
-    )
+    add_scenario_options(p, train=False, scenario_help="the scenario (default: the run's own)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     return p
 
 
-def _setup(args: argparse.Namespace) -> tuple[Scenario, Policy, str]:
+def _pursuers_spec(args: argparse.Namespace) -> str:
+    if args.policy and args.policy != "trained":
+        if args.pursuers:
+            raise ConfigError("--policy and --pursuers name the same thing: give one")
+        return args.policy
+    spec = args.pursuers or args.run
+    if not spec:
+        raise ConfigError(
+            f"give a run directory, or --pursuers {'|'.join(PURSUER_POLICIES)} with --scenario"
+        )
+    return spec
+
+
+def _scenario(args: argparse.Namespace, specs: Sequence[str | None]) -> Scenario:
     if args.set and not args.scenario:
         raise ConfigError("--set: needs --scenario (a trained run's scenario is fixed)")
-    if args.policy == "trained" or (args.run and not args.scenario):
-        if not args.run:
-            raise ConfigError("give a run directory or checkpoint (or --policy random/oracle)")
-        try:
-            scenario, model = load_trained(args.run)
-        except (OSError, ValueError) as err:
-            raise ConfigError(str(err)) from None
-    elif args.scenario:
-        scenario, model = scenario_from_args(args, train=False), None
-    else:
-        raise ConfigError("--policy random/oracle needs --scenario or a run directory")
-    if args.policy == "trained":
-        mode = "greedy" if args.greedy else "sampled"
-        return scenario, model_policy(model, args.greedy), f"trained policy ({mode})"
-    if args.policy == "random":
-        return scenario, random_policy(scenario), "random policy"
-    from .solve import TooLargeError, UnsupportedError
+    if args.scenario:
+        return scenario_from_args(args, train=False)
+    for spec in specs:  # the first run among the policies names the game
+        if spec and spec not in PURSUER_POLICIES and spec not in EVADER_POLICIES:
+            return load_run(spec).scenario
+    raise ConfigError("named policies need --scenario (or a run directory)")
 
-    try:
-        return scenario, oracle_policy(scenario), "oracle policy"
-    except (TooLargeError, UnsupportedError) as err:
-        raise ConfigError(f"--policy oracle: {err}") from None
+
+def _main(argv: Sequence[str]) -> int:
+    args = build_parser().parse_args(argv)
+    if args.cross_play:
+        return _cross_play(args)
+    pursuers = _pursuers_spec(args)
+    scenario = _scenario(args, [pursuers, args.evader])
+    game = matchup(scenario, pursuers, args.evader, greedy=args.greedy)
+    result = play(
+        game.scenario, game.pursuers, args.episodes, args.num_envs, args.seed, game.evader
+    )
+    report: dict[str, Any] = {
+        "scenario": scenario.name,
+        "policy": game.label,
+        **result.report(args.seed),
+    }
+    reference = args.reference or ("oracle" if scenario.mode == "grid" else "pursuit")
+    if game.evader is None and pursuers != reference:
+        report["reference"] = reference_report(
+            game.scenario, reference, args.episodes, args.num_envs, args.seed
+        )
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print(format_report(report, f"{scenario.name}: {game.label}, seed {args.seed}"))
+    return 0
+
+
+def _cross_play(args: argparse.Namespace) -> int:
+    pursuers = [s.strip() for s in _pursuers_spec(args).split(",") if s.strip()]
+    evaders = [s.strip() for s in (args.evader or "").split(",") if s.strip()] or [None]
+    scenario = _scenario(args, [*pursuers, *evaders])
+    games: list[tuple[str, str, Matchup]] = [
+        (p, e or scenario.evader, matchup(scenario, p, e, greedy=args.greedy))
+        for p in pursuers
+        for e in evaders
+    ]
+    rows = []
+    for p, e, game in games:
+        result = play(
+            game.scenario, game.pursuers, args.episodes, args.num_envs, args.seed, game.evader
+        )
+        rows.append({"pursuers": p, "evader": e, **result.report(args.seed)})
+    print(json.dumps(rows, indent=2) if args.json else format_cross_play(rows))
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m a2cm_phys.evaluate``; returns the exit status."""
     return run_cli(_main, argv)
-
-
-def _main(argv: Sequence[str]) -> int:
-    args = build_parser().parse_args(argv)
-    scenario, policy, label = _setup(args)
-    result = play(scenario, policy, args.episodes, args.num_envs, args.seed)
-    report = {"scenario": scenario.name, "policy": label, **result.report(args.seed)}
-    if args.json:
-        print(json.dumps(report, indent=2))
-    else:
-        print(format_report(report, f"{scenario.name}: {label}, seed {args.seed}"))
-    return 0
 
 
 if __name__ == "__main__":

@@ -1,17 +1,25 @@
-"""Named pursuer policies, as rollout policies: what learned ones are measured against.
+"""Named policies of either side, as rollout policies: what learned ones are measured against.
 
 - ``random``: uniform actions (discrete), or uniform commands in the unit square (continuous).
 - ``pursuit``: every pursuer heads straight for the evader (:mod:`a2cm_phys.baselines`).
 - ``oracle``: the exact optimum of the grid game (:mod:`a2cm_phys.oracle`); in physics
   mode the grid oracle driven in the physics arena: each body's centre is mapped to the
   cell it lies in, and the oracle's move becomes the velocity command in that direction.
+  Against a learned evader it is the oracle that is optimal against the random evader.
 
 Each is a :data:`~a2cm_phys.rollout.Policy`: ``policy(obs (B, obs_dim), rng) -> actions``.
+
+A :class:`Matchup` is one pairing to play: the game (its evader set to the evader's kind),
+the pursuers' policy, and a learned evader's policy where the evader is one (scripted
+evaders ``random``, ``flee`` and ``static`` are the scenario's own, injected in the core).
+:func:`matchup` builds one from names or run directories (see :func:`resolve_side`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -51,10 +59,15 @@ def pursuit_policy(scenario: Scenario) -> Policy:
 
 
 def grid_twin(scenario: Scenario) -> Scenario:
-    """The grid game a physics scenario plays at the resolution of its cells."""
+    """The grid game the oracle solves for a scenario: a physics scenario at the resolution
+    of its cells, and against the random evader where the evader is learned (the oracle
+    is then the team that is optimal against the random evader)."""
+    evader = "random" if scenario.evader == "learned" else scenario.evader
     if scenario.mode == "grid":
-        return scenario
-    return dataclasses.replace(scenario, mode="grid", control="discrete", physics=Physics())
+        return dataclasses.replace(scenario, evader=evader)
+    return dataclasses.replace(
+        scenario, mode="grid", control="discrete", physics=Physics(), evader=evader
+    )
 
 
 def oracle_policy(scenario: Scenario) -> Policy:
@@ -88,3 +101,56 @@ def pursuer_policy(name: str, scenario: Scenario) -> Policy:
     if name not in makers:
         raise ConfigError(f"unknown pursuer policy {name!r} (known: {', '.join(makers)})")
     return makers[name](scenario)
+
+
+EVADER_POLICIES = ("random", "flee", "static")
+"""Scripted evaders, played by the scenario's core."""
+
+
+@dataclass(frozen=True)
+class Matchup:
+    """One pairing of pursuers and evader, ready to play."""
+
+    scenario: Scenario
+    pursuers: Policy
+    evader: Policy | None  # a learned evader's policy, actions (B, 1, ...); None: scripted
+    label: str
+
+
+def matchup(
+    scenario: Scenario, pursuers: str, evader: str | None = None, *, greedy: bool = False
+) -> Matchup:
+    """Pursuers ``pursuers`` (a run directory or one of :data:`PURSUER_POLICIES`) against
+    ``evader`` (a run directory with a learned evader, or one of :data:`EVADER_POLICIES`;
+    ``None``: the scenario's own evader, or the pursuers' run's evader when it is learned)
+    in ``scenario``. Trained policies act greedily when ``greedy``.
+    """
+    from .evaluate import load_run, model_policy
+
+    pursuer_run = None if pursuers in PURSUER_POLICIES else load_run(pursuers)
+    evader_model, evader_name = None, evader or scenario.evader
+    if evader is not None and evader not in EVADER_POLICIES:
+        run = load_run(evader)
+        if run.evader is None:
+            raise ConfigError(f"--evader {evader}: the run has no learned evader")
+        evader_model, evader_name = run.evader, "learned"
+    elif evader is None and scenario.evader == "learned":
+        if pursuer_run is None or pursuer_run.evader is None:
+            raise ConfigError(
+                f"scenario '{scenario.name}' has a learned evader: give --evader (a run "
+                f"directory, or one of {', '.join(EVADER_POLICIES)})"
+            )
+        evader_model = pursuer_run.evader
+    game = dataclasses.replace(scenario, evader=evader_name)
+    if pursuer_run is not None:
+        pursuer_policy_ = model_policy(pursuer_run.pursuers, greedy)
+        p_label = f"{_short(pursuers)} ({'greedy' if greedy else 'sampled'})"
+    else:
+        pursuer_policy_, p_label = pursuer_policy(pursuers, game), pursuers
+    e_label = _short(evader) if evader_model is not None and evader else evader_name
+    e_policy = None if evader_model is None else model_policy(evader_model, greedy)
+    return Matchup(game, pursuer_policy_, e_policy, f"{p_label} vs {e_label} evader")
+
+
+def _short(path: str | None) -> str:
+    return Path(path).name if path else "learned"

@@ -62,6 +62,25 @@ def allocate_batch(
     }
 
 
+SHARED_KEYS = ("obs", "terminated", "truncated", "final_obs", "next_obs")
+"""Batch arrays that both teams of a game see alike (a learned evader's batch views them)."""
+
+
+def allocate_evader_batch(
+    batch: dict[str, np.ndarray],
+    action_shape: tuple[int, ...] = (),
+    action_dtype: np.dtype | type = np.int64,
+) -> dict[str, np.ndarray]:
+    """A learned evader's batch beside the pursuers' ``batch``: its own actions (one agent)
+    and rewards, the observations and episode ends shared (views of ``batch``)."""
+    steps, num_envs = batch["rewards"].shape
+    own = allocate_batch(steps, num_envs, 0, 1, action_shape, action_dtype)
+    return {
+        **{k: batch[k] for k in SHARED_KEYS},
+        **{k: own[k] for k in ("actions", "rewards", "reward_parts", "collisions")},
+    }
+
+
 def collect(
     env: VectorEnv,
     policy: Policy,
@@ -69,11 +88,15 @@ def collect(
     rng: np.random.Generator,
     batch: dict[str, np.ndarray],
     on_step: StepHook | None = None,
+    evader: tuple[Policy, dict[str, np.ndarray]] | None = None,
 ) -> tuple[np.ndarray, list[EpisodeSummary]]:
     """Step ``env`` ``len(batch["obs"])`` times from ``obs``, writing into ``batch``.
 
-    Returns the observations after the last step (also stored as ``batch["next_obs"]``) and
-    the episodes that finished meanwhile, in order. ``rng`` is the policy's only randomness.
+    ``evader`` is a learned evader's ``(policy, batch)`` (see :func:`allocate_evader_batch`):
+    its policy acts on the same observations after the pursuers' (one agent: actions
+    ``(B, 1, ...)``), and its batch gets its actions and its own reward. Returns the
+    observations after the last step (also stored as ``batch["next_obs"]``) and the episodes
+    that finished meanwhile, in order. ``rng`` is the policies' only randomness.
     """
     b_obs, b_actions, b_rewards = batch["obs"], batch["actions"], batch["rewards"]
     b_term, b_trunc, b_final = batch["terminated"], batch["truncated"], batch["final_obs"]
@@ -83,7 +106,14 @@ def collect(
     for t in range(len(b_obs)):
         b_obs[t] = obs
         actions = policy(obs, rng)
-        step = env.step(actions, validate=False)
+        if evader is None:
+            step = env.step(actions, validate=False)
+        else:
+            e_actions = evader[0](obs, rng)
+            step = env.step(actions, e_actions[:, 0], validate=False)
+            evader[1]["actions"][t] = e_actions
+            evader[1]["rewards"][t] = step.evader_reward
+            evader[1]["reward_parts"][t, :, 0] = step.evader_reward
         b_actions[t] = actions
         b_rewards[t] = step.reward
         reward_parts(scenario, step.outcome, b_parts[t])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
@@ -114,7 +115,8 @@ class EpisodeStats:
         self.truncations = 0
         self.collision_ends = 0
         self.collisions = 0
-        self.recent: deque[tuple[int, float, int]] = deque(maxlen=window)
+        # (length, return, collisions, a learned evader's return or NaN)
+        self.recent: deque[tuple[int, float, int, float]] = deque(maxlen=window)
 
     def add(self, episodes: Iterable[EpisodeSummary]) -> None:
         """Count finished episodes (in the order they finished)."""
@@ -124,16 +126,18 @@ class EpisodeStats:
             self.truncations += ep.truncated
             self.collision_ends += ep.collision_terminated
             self.collisions += ep.collisions
-            self.recent.append((ep.length, ep.ret, ep.collisions))
+            evader = ep.evader_ret if ep.evader_ret is not None else math.nan
+            self.recent.append((ep.length, ep.ret, ep.collisions, evader))
 
     def recent_mean(self, column: int, last: int | None = None) -> float:
-        """Mean of column 0 (length), 1 (return) or 2 (collisions) over the last episodes."""
+        """Mean of column 0 (length), 1 (return), 2 (collisions) or 3 (a learned evader's
+        return) over the last episodes."""
         rows = list(self.recent)[-last:] if last else self.recent
         return float(np.mean([r[column] for r in rows])) if rows else float("nan")
 
     def state(self) -> dict[str, Any]:
         """A plain dict of the tallies and the window (for checkpoints)."""
-        rows = np.array(self.recent, dtype=np.float64).reshape(-1, 3)
+        rows = np.array(self.recent, dtype=np.float64).reshape(-1, 4)
         counts = ("episodes", "captures", "truncations", "collision_ends", "collisions")
         return {"window": self.window, "recent": rows, **{k: getattr(self, k) for k in counts}}
 
@@ -143,5 +147,11 @@ class EpisodeStats:
         stats = cls(int(state["window"]))
         for key in ("episodes", "captures", "truncations", "collision_ends", "collisions"):
             setattr(stats, key, int(state[key]))
-        stats.recent.extend((int(n), float(r), int(c)) for n, r, c in state["recent"])
+        rows = np.asarray(state["recent"], dtype=np.float64)
+        if rows.shape[-1] == 3:  # checkpoints from before the learned evader
+            rows = np.concatenate([rows, np.full((len(rows), 1), math.nan)], axis=-1)
+        stats.recent.extend(
+            (int(n), float(r), int(c), math.nan if math.isnan(e) else float(e))
+            for n, r, c, e in rows
+        )
         return stats

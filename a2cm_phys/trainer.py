@@ -28,7 +28,7 @@ import torch
 from tqdm import tqdm
 
 from . import checkpoint
-from .algos import Learner, NonFiniteLoss, make_model
+from .algos import NonFiniteLoss
 from .config import (
     ConfigError,
     Scenario,
@@ -38,8 +38,9 @@ from .config import (
     to_dict,
 )
 from .envs.vector import VectorEnv
-from .rollout import StepHook, allocate_batch, collect
+from .rollout import StepHook, collect
 from .stats import EpisodeStats
+from .teams import make_teams
 
 EXIT_INTERRUPTED = 130
 """Exit status after Ctrl-C (a checkpoint was saved; the run can be resumed)."""
@@ -106,12 +107,10 @@ class Trainer:
         self.progress = progress
         self.checkpoint_seconds, self.checkpoint_every = checkpoint_seconds, checkpoint_every
         self.env = VectorEnv(scenario, cfg.num_envs, workers=cfg.workers)
-        self.model = make_model(cfg, scenario)
-        self.learner = Learner(self.model, cfg)
+        self.pursuers, self.evader = make_teams(scenario, cfg)
+        self.model, self.learner = self.pursuers.model, self.pursuers.learner
+        self.batch = self.pursuers.batch
         self.rng = policy_rng(cfg.seed)
-        self.batch = allocate_batch(
-            cfg.steps_per_env, cfg.num_envs, scenario.obs_dim, scenario.pursuers
-        )
         self.stats = EpisodeStats()
         self.update = 0
         self.last_metrics: dict[str, float] = {}
@@ -134,6 +133,7 @@ class Trainer:
             "train": to_dict(self.cfg),
             "update": self.update,
             "learner": self.learner.state_dict(),
+            "evader_learner": None if self.evader is None else self.evader.learner.state_dict(),
             "rng": self.rng.bit_generator.state,
             "env": self.env.state(),
             "stats": self.stats.state(),
@@ -143,6 +143,8 @@ class Trainer:
     def load_checkpoint_state(self, state: dict[str, Any]) -> None:
         """Continue from :meth:`checkpoint_state` (same scenario and num_envs)."""
         self.learner.load_state_dict(state["learner"])
+        if self.evader is not None:
+            self.evader.learner.load_state_dict(state["evader_learner"])
         self.rng.bit_generator.state = state["rng"]
         self.obs = self.env.load_state(state["env"])
         self.stats = EpisodeStats.from_state(state["stats"])
@@ -241,9 +243,16 @@ class Trainer:
         # Snapshot so that an interrupt inside the rollout can rewind to the update boundary.
         self._boundary = (self.env.state(), self.rng.bit_generator.state)
         self._phase = _ROLLOUT
-        obs, episodes = collect(self.env, self.model.act, self.obs, self.rng, self.batch, on_step)
+        evader = None if self.evader is None else (self.evader.model.act, self.evader.batch)
+        obs, episodes = collect(
+            self.env, self.model.act, self.obs, self.rng, self.batch, on_step, evader
+        )
         self._phase = _LEARN
-        self.last_metrics = self.learner.update(self.batch)
+        progress = self.update / self.cfg.updates
+        self.last_metrics = self.learner.update(self.batch, progress)
+        if self.evader is not None:
+            evader_metrics = self.evader.learner.update(self.evader.batch, progress)
+            self.last_metrics.update({f"evader_{k}": v for k, v in evader_metrics.items()})
         self.obs = obs
         self.stats.add(episodes)
         self.update += 1
@@ -303,6 +312,11 @@ class Trainer:
             "episodes": s.episodes,
             "mean_length_last_1000": s.recent_mean(0),
             "mean_return_last_1000": s.recent_mean(1),
+            **(
+                {"evader_mean_return_last_1000": s.recent_mean(3)}
+                if self.evader is not None
+                else {}
+            ),
             "captures": s.captures,
             "capture_rate": s.captures / s.episodes if s.episodes else math.nan,
             "truncations": s.truncations,
@@ -454,6 +468,7 @@ class _Progress:
                 episodes=s.episodes,
                 len100=f"{s.recent_mean(0, 100):.2f}",
                 ret100=f"{s.recent_mean(1, 100):.4g}",
+                **({"evader_ret100": f"{s.recent_mean(3, 100):.4g}"} if t.evader else {}),
                 collisions=s.collisions,
                 steps_s=f"{t._session_steps / (now - t._session_start):.0f}",
                 refresh=False,

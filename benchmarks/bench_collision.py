@@ -91,6 +91,38 @@ VARIANTS: dict[str, dict[str, Any]] = {
         "lagrange_lr": 10.0,
         "lr_schedule": "linear",
     },
+    "+split+advnorm+anneal+gae": {
+        "num_envs": 16,
+        "value_norm": True,
+        "split_rewards": True,
+        "normalize_advantages": True,
+        "lr_schedule": "linear",
+        "gae_lambda": 0.95,
+    },
+    "+split+advnorm+anneal+ent": {
+        "num_envs": 16,
+        "value_norm": True,
+        "split_rewards": True,
+        "normalize_advantages": True,
+        "lr_schedule": "linear",
+        "entropy_coef": 1e-3,
+    },
+    "+split+advnorm+anneal+lr1e-2": {
+        "num_envs": 16,
+        "value_norm": True,
+        "split_rewards": True,
+        "normalize_advantages": True,
+        "lr_schedule": "linear",
+        "lr": 1e-2,
+    },
+    "+splitraw+advnorm+anneal": {
+        "num_envs": 16,
+        "value_norm": True,
+        "split_rewards": True,
+        "normalize_advantages": True,
+        "lr_schedule": "linear",
+        "balance_rewards": False,
+    },
     "ours": {},  # the defaults
 }
 

@@ -84,7 +84,7 @@ def test_cli_prints_statistics_with_confidence_intervals(
     assert "capture rate" in out and "collisions / episode" in out and "95% CI" in out
     assert main([str(run_dir / "checkpoint.pt"), "--episodes", "200", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["episodes"] == 200 and report["policy"] == "trained policy (sampled)"
+    assert report["episodes"] == 200 and report["policy"].endswith("(sampled) vs random evader")
     mean = report["capture_steps"]["mean"]
     assert mean["lo"] <= mean["value"] <= mean["hi"]
 
@@ -92,7 +92,8 @@ def test_cli_prints_statistics_with_confidence_intervals(
 def test_cli_random_policy_and_errors(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--policy", "random", "--scenario", "grid", "--episodes", "300", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["policy"] == "random policy" and report["capture_rate"]["value"] == 1.0
+    assert report["policy"] == "random vs random evader"
+    assert report["capture_rate"]["value"] == 1.0
     assert main(["no/such/run"]) == 2
     assert main(["--policy", "random"]) == 2
     assert "error:" in capsys.readouterr().err

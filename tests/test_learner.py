@@ -16,7 +16,7 @@ from torch.distributions import Categorical
 from a2cm_phys.algos.distributions import GaussianActions
 from a2cm_phys.algos.learner import Learner, NonFiniteLoss
 from a2cm_phys.algos.models import ActorCritic, StackedLinear
-from a2cm_phys.config import Train
+from a2cm_phys.config import Train, load_train
 from a2cm_phys.rollout import allocate_batch
 
 torch.set_num_threads(1)
@@ -391,3 +391,42 @@ def test_split_rewards_value_each_component_and_scale_it_apart() -> None:
     assert learner._actor_advantage(adv)[0, 0, 0].item() == pytest.approx(expected, rel=1e-6)
     with pytest.raises(ValueError, match="components"):
         learner.update(dict(batch, reward_parts=parts[..., :1]))
+
+
+def test_collision_constraint_multiplier_follows_dual_ascent() -> None:
+    cfg = Train(
+        value_norm=True,
+        split_rewards=True,
+        constrain_collisions=True,
+        collision_budget=0.01,
+        lagrange_lr=2.0,
+    )
+    m = ActorCritic(OBS, N, A, 16, shared_critic=True, n_values=2)
+    learner = Learner(m, cfg)
+    batch = trainer_batch(seed=2)  # T=8, B=16: 128 steps
+    batch["reward_parts"] = np.stack([batch["rewards"], np.zeros_like(batch["rewards"])], -1)
+    batch["collisions"] = np.zeros(batch["rewards"].shape, dtype=np.int64)
+    batch["collisions"][0, :4] = 1  # 4 collisions in 128 steps: 0.03125 per step
+    metrics = learner.update(batch)
+    assert metrics["multiplier"] == pytest.approx(2.0 * (4 / 128 - 0.01))
+    learner.update(batch)
+    assert learner.multiplier == pytest.approx(2 * 2.0 * (4 / 128 - 0.01))
+    batch["collisions"][:] = 0  # no collision: λ falls by lr·budget, never below 0
+    for _ in range(10):
+        learner.update(batch)
+    assert learner.multiplier == 0.0
+    # with λ = 0 the actors see only the time component; λ weighs the collision cost in
+    learner.multiplier = 3.0
+    _, std = learner.value_norm.stats()
+    adv = torch.tensor([1.0, 2.0], dtype=torch.float64).expand(2, 2, 1, 2)
+    expected = (1.0 / std[0] + 3.0 * 2.0 / std[1]) / 4.0
+    assert learner._actor_advantage(adv)[0, 0, 0].item() == pytest.approx(expected.item())
+    state = learner.state_dict()
+    other = Learner(ActorCritic(OBS, N, A, 16, shared_critic=True, n_values=2), cfg)
+    other.load_state_dict(state)
+    assert other.multiplier == 3.0
+
+
+def test_constraint_needs_split_components() -> None:
+    with pytest.raises(ValueError, match="split_rewards"):
+        load_train({"constrain_collisions": True})

@@ -230,7 +230,7 @@ class Learner:
 
     def _actor_advantage(self, adv: torch.Tensor) -> torch.Tensor:
         """``(T, B, C, K)`` component advantages → ``(T, B, C)`` advantage of the actors."""
-        if self.cfg.split_rewards and self.value_norm is not None:
+        if self.cfg.split_rewards and self.cfg.balance_rewards and self.value_norm is not None:
             _, std = self.value_norm.stats()
             adv = adv / std.to(adv.dtype)
         if self.cfg.constrain_collisions:  # time + λ·(minus collisions), both normalised

@@ -1,0 +1,64 @@
+"""The learning sides of a run: the pursuers' team and, with a learned evader, the evader.
+
+Pursuers and evader are the same kind of agent with their own reward (SPEC §1b): each side
+is a :class:`Team` with its own actor–critic model, learner and rollout buffer. The
+pursuers are trained by A2C or A2CM (``Train.algo``); a learned evader is a team of one
+with its own A2C actor–critic, trained with the pursuers' settings on its own reward
+(minus the team reward by default), without the pursuers' collision-specific options.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from .algos import ActorCritic, Learner, make_model
+from .config import Scenario, Train
+from .rollout import allocate_batch, allocate_evader_batch
+
+
+@dataclass
+class Team:
+    """One learning side: its name, model, learner and rollout buffer."""
+
+    name: str
+    model: ActorCritic
+    learner: Learner
+    batch: dict[str, np.ndarray]
+
+
+def evader_train_cfg(cfg: Train) -> Train:
+    """The learned evader's training settings: the pursuers', as A2C of one agent on its one
+    reward (no reward components, no collision constraint: collisions are the pursuers')."""
+    return dataclasses.replace(
+        cfg, algo="a2c", split_rewards=False, constrain_collisions=False
+    )
+
+
+def _evader_generator(seed: int) -> torch.Generator:
+    """A torch generator for the evader's initial weights, independent of the pursuers'."""
+    state = np.random.SeedSequence([seed, 2]).generate_state(1, np.uint64)[0]
+    return torch.Generator().manual_seed(int(state))
+
+
+def make_teams(scenario: Scenario, cfg: Train) -> tuple[Team, Team | None]:
+    """The pursuers' team and, if the scenario's evader is learned, the evader's."""
+    model = make_model(cfg, scenario)
+    batch = allocate_batch(
+        cfg.steps_per_env,
+        cfg.num_envs,
+        scenario.obs_dim,
+        scenario.pursuers,
+        model.dist.action_shape,
+        model.dist.action_dtype,
+    )
+    pursuers = Team("pursuers", model, Learner(model, cfg), batch)
+    if scenario.evader != "learned":
+        return pursuers, None
+    ecfg = evader_train_cfg(cfg)
+    emodel = make_model(ecfg, scenario, _evader_generator(cfg.seed), n_agents=1)
+    ebatch = allocate_evader_batch(batch, emodel.dist.action_shape, emodel.dist.action_dtype)
+    return pursuers, Team("evader", emodel, Learner(emodel, ecfg), ebatch)

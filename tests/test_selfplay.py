@@ -1,0 +1,79 @@
+"""Self-play: one run trains the pursuers and a learned evader, each on its own reward, and
+resumes bit for bit in grid mode."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from a2cm_phys import checkpoint
+from a2cm_phys.config import load_scenario, load_train
+from a2cm_phys.envs.vector import VectorEnv
+from a2cm_phys.rollout import collect
+from a2cm_phys.teams import make_teams
+from a2cm_phys.train import main
+from a2cm_phys.trainer import Trainer, policy_rng
+
+VS = ("--scenario", "grid_vs", "--num-envs", "4", "--batch-size", "32", "--seed", "5")
+
+
+def test_both_teams_collect_their_own_actions_and_rewards() -> None:
+    scenario = load_scenario("grid_vs")
+    cfg = load_train({"num_envs": 4, "batch_size": 32})
+    pursuers, evader = make_teams(scenario, cfg)
+    assert evader is not None and evader.model.n_agents == 1 and evader.model.n_critics == 1
+    env = VectorEnv(scenario, 4)
+    obs = env.reset(0)
+    collect(
+        env,
+        pursuers.model.act,
+        obs,
+        policy_rng(0),
+        pursuers.batch,
+        evader=(evader.model.act, evader.batch),
+    )
+    p, e = pursuers.batch, evader.batch
+    assert e["obs"] is p["obs"] and e["terminated"] is p["terminated"]  # shared, not copied
+    np.testing.assert_array_equal(e["rewards"], -p["rewards"])  # zero-sum by default
+    assert e["actions"].shape == (8, 4, 1) and p["actions"].shape == (8, 4, 3)
+    assert len(np.unique(e["actions"])) > 1  # the evader's own sampled moves
+
+
+def test_scripted_evader_has_no_evader_team() -> None:
+    _, evader = make_teams(load_scenario("grid"), load_train({}))
+    assert evader is None
+
+
+def test_one_run_trains_both_teams(tmp_path: Path) -> None:
+    scenario = load_scenario("grid_vs")
+    cfg = load_train({"num_envs": 4, "batch_size": 32, "updates": 5})
+    trainer = Trainer(scenario, cfg, tmp_path, record=False)
+    assert trainer.evader is not None
+    before = [p.detach().clone() for p in trainer.evader.model.parameters()]
+    assert trainer.run() == "done"
+    after = list(trainer.evader.model.parameters())
+    assert all(not torch.equal(a, b) for a, b in zip(before, after, strict=True))
+    assert "evader_loss" in trainer.last_metrics
+    summary = trainer.summary()
+    assert summary["evader_mean_return_last_1000"] == -summary["mean_return_last_1000"]
+    state = checkpoint.load(tmp_path)
+    assert state["evader_learner"]["model"].keys() == trainer.evader.model.state_dict().keys()
+
+
+def test_self_play_resumes_bit_for_bit(tmp_path: Path) -> None:
+    full_dir, part_dir = tmp_path / "a", tmp_path / "b"
+    assert main([*VS, "--updates", "12", "--logdir", str(full_dir), "--no-progress"]) == 0
+    assert main([*VS, "--updates", "6", "--logdir", str(part_dir), "--no-progress"]) == 0
+    (full,) = full_dir.iterdir()
+    (part,) = part_dir.iterdir()
+    assert main(["--resume", str(part), "--updates", "12", "--no-progress"]) == 0
+    a, b = checkpoint.load(full), checkpoint.load(part)
+    for team in ("learner", "evader_learner"):
+        for key, value in a[team]["model"].items():
+            assert torch.equal(value, b[team]["model"][key]), (team, key)
+    sa, sb = (json.loads((p / "summary.json").read_text()) for p in (full, part))
+    for key in ("episodes", "mean_length_last_1000", "evader_mean_return_last_1000"):
+        assert sa[key] == sb[key]
