@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 from test_record import make_log
+from test_replay import damage_a_chunk
 
 from a2cm_phys.plot import load_run, log_files, main, moving_average
 from a2cm_phys.record.parts import new_part
@@ -62,10 +63,8 @@ def test_an_empty_or_damaged_log_is_an_error_not_an_empty_figure(
     assert main([str(tmp_path / "empty"), "--out", str(tmp_path / "figs")]) == 2
     assert "no finished episode" in capsys.readouterr().err
     path = tmp_path / "damaged" / "episodes.mcap"
-    make_log(path, steps=400, chunk_bytes=2000)
-    data = bytearray(path.read_bytes())
-    data[len(data) // 2] ^= 0xFF
-    path.write_bytes(bytes(data))
+    make_log(path, steps=400, flush_seconds=0)
+    damage_a_chunk(path)
     assert main([str(path.parent), "--out", str(tmp_path / "figs")]) == 2
     assert "damaged" in capsys.readouterr().err
     assert not (tmp_path / "figs").exists() or not any((tmp_path / "figs").iterdir())

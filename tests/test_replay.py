@@ -62,6 +62,18 @@ def rewrite(
         writer.finish()
 
 
+def damage_a_chunk(path: Path) -> None:
+    """Flip a byte in the middle of the middle chunk of a closed log."""
+    with open(path, "rb") as fh:
+        chunks = sorted(
+            make_reader(fh).get_summary().chunk_indexes, key=lambda c: c.chunk_start_offset
+        )
+    chunk = chunks[len(chunks) // 2]
+    data = bytearray(path.read_bytes())
+    data[chunk.chunk_start_offset + chunk.chunk_length // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
 def test_summary_table(run_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main([str(run_dir)]) == 0
     out = capsys.readouterr().out
@@ -166,10 +178,12 @@ def test_a_damaged_chunk_is_reported_as_damage_not_as_a_crash(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     path = tmp_path / "episodes.mcap"
-    make_log(path, steps=400, chunk_bytes=2000)
-    data = bytearray(path.read_bytes())
-    data[len(data) // 2] ^= 0xFF  # inside a chunk of a cleanly closed file
-    path.write_bytes(bytes(data))
+    make_log(path, steps=400, flush_seconds=0)
+    whole = read_run(path).n_episodes
+    damage_a_chunk(path)
+    log = read_run(path)
+    assert log.damaged and not log.clean and "1 damaged chunk(s) skipped" in log.error
+    assert whole // 2 < log.n_episodes < whole  # the chunks after the damage are read too
     assert main([str(path)]) == 1
     out = capsys.readouterr().out
     assert "DAMAGED" in out and "NOT closed cleanly" not in out

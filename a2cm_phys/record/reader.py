@@ -9,6 +9,7 @@ in one chunk, so an episode is either recovered whole or not at all.
 
 from __future__ import annotations
 
+import io
 import json
 import struct
 from collections.abc import Iterator
@@ -18,7 +19,8 @@ from typing import Any
 
 import numpy as np
 import zstandard
-from mcap.exceptions import InvalidMagic, McapError
+from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.reader import SeekingReader
 from mcap.records import Channel, Footer, Message, Metadata
 from mcap.stream_reader import StreamReader
 from mcap.writer import MCAP0_MAGIC
@@ -200,66 +202,120 @@ def read_run(path: str | Path) -> RunLog:
     return read_file(path)
 
 
+class _Collector:
+    """What :func:`read_file` gathers from a log's records."""
+
+    def __init__(self) -> None:
+        self.metadata: dict[str, Any] = {}
+        self.summaries: list[dict[str, Any]] = []
+        self.updates: list[dict[str, Any]] = []
+        self.blocks: list[bytes] = []
+        self.where: dict[int, int] = {}
+        self.counts: dict[str, int] = {}
+        self.topics: dict[int, str] = {}
+        self.footer = False
+
+    def take(self, record: Any) -> None:
+        if isinstance(record, Message):
+            topic = self.topics[record.channel_id]
+            self.counts[topic] = self.counts.get(topic, 0) + 1
+            if topic == SUMMARY_TOPIC:
+                self.summaries.append(json.loads(record.data))
+            elif topic == TRAJECTORY_TOPIC:
+                for episode in _episode_ids(record.data):
+                    self.where[episode] = len(self.blocks)
+                self.blocks.append(record.data)
+            elif topic == UPDATE_TOPIC:
+                self.updates.append(json.loads(record.data))
+        elif isinstance(record, Channel):
+            self.topics[record.id] = record.topic
+        elif isinstance(record, Metadata) and record.name == METADATA_NAME:
+            self.metadata = _decode_metadata(record.metadata)
+        elif isinstance(record, Footer):
+            self.footer = True
+
+
 def read_file(path: str | Path) -> RunLog:
     """Read one log file (see :func:`read_run`)."""
     path = Path(path)
     if not path.is_file():
         raise LogError(f"{path}: no such file")
-    metadata: dict[str, Any] = {}
-    summaries: list[dict[str, Any]] = []
-    updates: list[dict[str, Any]] = []
-    blocks: list[bytes] = []
-    where: dict[int, int] = {}
-    counts: dict[str, int] = {}
-    topics: dict[int, str] = {}
-    clean, error, damaged = False, None, False
+    got = _Collector()
+    error, damaged = None, False
     with open(path, "rb") as fh:
-        reader = StreamReader(fh, validate_crcs=True)
-        records = reader.records
         try:
-            for record in records:
-                if isinstance(record, Message):
-                    topic = topics[record.channel_id]
-                    counts[topic] = counts.get(topic, 0) + 1
-                    if topic == SUMMARY_TOPIC:
-                        summaries.append(json.loads(record.data))
-                    elif topic == TRAJECTORY_TOPIC:
-                        for episode in _episode_ids(record.data):
-                            where[episode] = len(blocks)
-                        blocks.append(record.data)
-                    elif topic == UPDATE_TOPIC:
-                        updates.append(json.loads(record.data))
-                elif isinstance(record, Channel):
-                    topics[record.id] = record.topic
-                elif isinstance(record, Metadata) and record.name == METADATA_NAME:
-                    metadata = _decode_metadata(record.metadata)
-                elif isinstance(record, Footer):
-                    clean = True
+            for record in StreamReader(fh, validate_crcs=True).records:
+                got.take(record)
         except InvalidMagic:
             raise LogError(f"{path}: not an MCAP file") from None
         except _TRUNCATION_ERRORS as err:
-            if not topics and not metadata:
+            if not got.topics and not got.metadata:
                 raise LogError(
                     f"{path}: not an MCAP run log, or cut before its metadata ({_describe(err)})"
                 ) from None
             error = f"{_describe(err)} near byte {fh.tell():,}"
-            clean = False  # a footer without the closing magic is not a clean end
+            got.footer = False  # a footer without the closing magic is not a clean end
             damaged = _ends_with_magic(fh)
-    if not metadata:
+            if damaged:  # closed cleanly: its index lets us read around the damage
+                error, got = _read_around_damage(fh, got, error)
+    if not got.metadata:
         raise LogError(f"{path}: not an a2cm_phys run log (no '{METADATA_NAME}' metadata)")
     return RunLog(
         path=path,
-        metadata=metadata,
-        episodes=_columns(summaries),
-        updates=updates,
-        clean=clean,
+        metadata=got.metadata,
+        episodes=_columns(got.summaries),
+        updates=got.updates,
+        clean=got.footer and not damaged,
         error=error,
         damaged=damaged,
         parts=[path],
-        topic_counts=counts,
-        _blocks=blocks,
-        _where=where,
+        topic_counts=got.counts,
+        _blocks=got.blocks,
+        _where=got.where,
     )
+
+
+def _read_around_damage(fh: Any, first: _Collector, error: str) -> tuple[str, _Collector]:
+    """Read a damaged but closed file chunk by chunk through its summary's chunk index,
+    skipping the chunks that fail their checks; ``(error, collector)``, or the first
+    reading's if the index itself is unreadable."""
+    try:
+        fh.seek(0)  # the reader takes the current position as the file's start
+        summary = SeekingReader(fh, validate_crcs=True).get_summary()
+    except _TRUNCATION_ERRORS:
+        return error, first
+    if summary is None or not summary.chunk_indexes:
+        return error, first
+    got = _Collector()
+    got.metadata, got.topics = first.metadata, {c.id: c.topic for c in summary.channels.values()}
+    bad = []
+    for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+        fh.seek(index.chunk_start_offset)
+        data = fh.read(index.chunk_length)
+        chunk = _Collector()
+        chunk.topics = got.topics
+        try:
+            for record in StreamReader(
+                io.BytesIO(data), skip_magic=True, validate_crcs=True
+            ).records:
+                chunk.take(record)
+        except EndOfFile:  # the chunk was read whole; nothing follows it in this buffer
+            pass
+        except _TRUNCATION_ERRORS:
+            bad.append(index.chunk_start_offset)
+            continue
+        for block in chunk.blocks:  # keep block numbers global
+            for episode in _episode_ids(block):
+                got.where[episode] = len(got.blocks)
+            got.blocks.append(block)
+        got.summaries += chunk.summaries
+        got.updates += chunk.updates
+        for topic, n in chunk.counts.items():
+            got.counts[topic] = got.counts.get(topic, 0) + n
+    if not bad:
+        return f"damage outside the chunks, all {len(summary.chunk_indexes)} read: {error}", got
+    where = ", ".join(f"byte {b:,}" for b in bad[:3]) + (" …" if len(bad) > 3 else "")
+    return f"{len(bad)} damaged chunk(s) skipped (at {where}): {error}", got
 
 
 def _ends_with_magic(fh: Any) -> bool:
