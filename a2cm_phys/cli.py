@@ -10,7 +10,7 @@
   option) and ``--preset NAME``; explicit options win over ``--set``, which wins over the
   preset.
 - argparse ``type=`` checks (:func:`int_range`, :func:`positive_float`, :data:`SEED`) and
-  path checks (:func:`writable_dir`, :func:`output_dir`) that run before anything is written.
+  path checks (:func:`writable_dir`, :func:`output_file`) that run before anything is written.
 """
 
 from __future__ import annotations
@@ -149,13 +149,6 @@ def writable_dir(path: str | Path, option: str) -> Path:
         raise UsageError(f"{option} {path}: {what}")
     if not os.access(probe, os.W_OK | os.X_OK):
         raise UsageError(f"{option} {path}: cannot write in {probe} (permission denied)")
-    return path
-
-
-def output_dir(path: str | Path, option: str) -> Path:
-    """:func:`writable_dir`, then create it."""
-    path = writable_dir(path, option)
-    path.mkdir(parents=True, exist_ok=True)
     return path
 
 
