@@ -61,7 +61,7 @@ CASES = [
     ("evaluate", ["--policy", "random", "--seed", str(2**64)], "--seed"),
     ("evaluate", ["--policy", "random", "--set", "size=3"], "--set"),
     ("evaluate", ["{dir}"], "no checkpoint"),
-    ("evaluate", ["--policy", "oracle", "--scenario", "phys"], "grid"),
+    ("evaluate", ["--policy", "random", "--scenario", "nope"], "unknown scenario"),
     # replay
     ("replay", ["{dir}"], "no episodes.mcap"),
     ("replay", ["{file}"], "not an MCAP file"),
