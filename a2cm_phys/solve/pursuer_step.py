@@ -17,11 +17,12 @@ Three implementations, picked by the table:
   (:func:`~.model.free_table`), is a ``C × C`` matrix per evader cell; a step is ``N``
   batched matrix products per evader move.
 - *general* (e.g. learned actors): a pursuer's probabilities depend on every agent's
-  cell, so nothing factorises: a step gathers ``x`` at the ``A^N`` next states of every
-  state and weighs them by the joint probabilities. The next states' indices do not
-  depend on the evader's move once ``x`` is shifted along the evader's axis, so one index
-  array serves all moves. A pursuer landing on the evader's cell lands on a state where
-  ``x`` is zero; swaps and (``terminate`` mode) collisions are masked out of the weights.
+  cell, so nothing factorises: every state's ``A^N`` next states, weighed by the joint
+  probabilities, form a sparse ``S × S`` matrix (torch CSR: one fused gather–multiply–sum).
+  Which next state does not depend on the evader's move once ``x`` is shifted along the
+  evader's axis, so one matrix product serves all moves and columns at once. A pursuer
+  landing on the evader's cell lands on a state where ``x`` is zero; collisions
+  (``terminate`` mode) are left out of the matrix, and swaps are subtracted again, sparsely.
 
 The product kind's tables and the collision masks come from :meth:`GridRules.apply` on
 every one- and two-pursuer configuration; the tests compare the three kinds with each
@@ -30,7 +31,8 @@ other and with plain enumeration of the rules.
 
 from __future__ import annotations
 
-from typing import Literal
+import warnings
+from typing import Any, Literal
 
 import numpy as np
 
@@ -70,9 +72,9 @@ def memory_estimate(scenario: Scenario, kind: str, moves: int) -> float:
         return float(base + s * moves * 24)
     if kind == "product":
         return float(base + 3 * s * COLUMNS * 8)
-    full = s * a**n  # (state, joint action) pairs: indices, weights, gathered values
-    swaps = full * 8 * moves * min(1.0, 2.0 * n / scenario.size**2)
-    return float(base + full * (8 + 8 + 8 + 2) + swaps)
+    full = s * a**n  # (state, joint action) pairs: building the sparse matrix
+    swaps = full * 24 * moves * min(1.0, n / scenario.size**2)
+    return float(base + full * 48 + swaps)
 
 
 def check_size(
@@ -148,11 +150,11 @@ class PursuerStep:
         if self.kind == "product":
             self._build_matrices()
         else:
-            self._build_gather()
+            self._build_sparse()
         ones = self.valid.astype(np.float64)[:, None]  # 1 where the episode goes on
         self.p_capture = self.p_end = 1.0 - self.expect(ones)[..., 0]
         if self.terminate:  # now also end the episode on collisions
-            self.weight *= self.nocoll
+            self._fold_collisions()
             self.p_end = 1.0 - self.expect(ones)[..., 0]
 
     # ------------------------------------------------------------------ deterministic
@@ -200,8 +202,9 @@ class PursuerStep:
 
     # ------------------------------------------------------------------ general
 
-    def _build_gather(self) -> None:
-        """Next-state indices and joint probabilities of every (state, joint action)."""
+    def _build_sparse(self) -> None:
+        """The step as one sparse ``S × S`` matrix (shared by all evader moves) and, per
+        move, the swap entries to take out again."""
         c, a, n, s = self.c, self.a, self.n, self.n_states
         cells = state_cells(self.scenario)
         joint = (s,) + (a,) * n
@@ -211,12 +214,11 @@ class PursuerStep:
             shape = (s,) + (1,) * i + (a,) + (1,) * (n - 1 - i)
             index += (self.pmove[cells[i]] * c ** (n - i)).reshape(shape)
             weight *= self.table[:, i, :].reshape(shape)
-        self.index = index.reshape(s, -1)
-        self.weight = weight.reshape(s, -1)
-        self.buffer = np.empty(self.index.shape)
+        self.index, self.weight = index.reshape(s, -1), weight.reshape(s, -1)
+        self.matrix = self._csr(self.weight)
         # Swaps: pursuer i moves onto the evader's cell e as the evader moves onto p_i.
-        # A capture that the gather cannot see: those (state, joint action) entries are
-        # subtracted again, sparsely (they need an adjacent pursuer and the move onto it).
+        # A capture the matrix cannot see (the next state is a valid one): those
+        # (state, joint action) entries are subtracted again, sparsely.
         self.swaps: list[tuple[np.ndarray, np.ndarray]] = []
         for b in range(len(self.moves)):
             target = self.emove[cells[-1], b]
@@ -229,33 +231,68 @@ class PursuerStep:
                 hit |= swap.reshape((len(rows),) + (1,) * i + (a,) + (1,) * (n - 1 - i))
             r, j = np.nonzero(hit.reshape(len(rows), a**n))
             self.swaps.append((rows[r], rows[r] * a**n + j))
-        self.nocoll = None
-        if self.terminate:
-            pair = pair_table(self.scenario) == 0
-            ok = np.ones(joint, dtype=bool)
-            for i in range(n):
-                for k in range(i + 1, n):
-                    shape_i = (s,) + (1,) * i + (a,) + (1,) * (n - 1 - i)
-                    shape_k = (s,) + (1,) * k + (a,) + (1,) * (n - 1 - k)
-                    ai = np.arange(a).reshape(shape_i[1:])
-                    ak = np.arange(a).reshape(shape_k[1:])
-                    pi = cells[i].reshape((s,) + (1,) * n)
-                    pk = cells[k].reshape((s,) + (1,) * n)
-                    ok &= pair[pi, ai, pk, ak]
-            self.nocoll = ok.reshape(s, -1)
+        self._swap_entries()
+        if not self.terminate:
+            del self.index, self.weight  # only the collision mask still needs them
 
-    def _general(self, x: np.ndarray, b: int, out: np.ndarray) -> None:
-        """One evader move: shift ``x`` along the evader's axis, gather, weigh."""
-        shifted = np.take(x.reshape(-1, self.c, x.shape[1]), self.emove[:, b], axis=1)
-        shifted = shifted.reshape(self.n_states, -1)
-        rows, flat = self.swaps[b]
-        weight = self.weight.ravel()[flat]
-        for col in range(x.shape[1]):
-            values = np.ascontiguousarray(shifted[:, col])
-            np.take(values, self.index, mode="clip", out=self.buffer)
-            out[:, col] = np.einsum("sj,sj->s", self.weight, self.buffer)
-            swapped = weight * self.buffer.ravel()[flat]
-            out[:, col] -= np.bincount(rows, weights=swapped, minlength=self.n_states)
+    def _swap_entries(self) -> None:
+        """Per evader move: the swap entries' rows, columns and weights."""
+        index, weight = self.index.ravel(), self.weight.ravel()
+        self.swap_entries = [(rows, index[flat], weight[flat]) for rows, flat in self.swaps]
+
+    def _csr(self, weight: np.ndarray) -> Any:
+        """``weight (S, J)`` at columns ``index (S, J)`` as a torch CSR matrix, duplicate
+        columns (moves that bump into a wall) summed."""
+        import torch
+
+        order = np.argsort(self.index, axis=1, kind="stable")
+        cols = np.take_along_axis(self.index, order, axis=1)
+        first = np.ones(cols.shape, dtype=bool)
+        first[:, 1:] = cols[:, 1:] != cols[:, :-1]
+        starts = np.flatnonzero(first)
+        values = np.add.reduceat(np.take_along_axis(weight, order, axis=1).ravel(), starts)
+        crow = np.concatenate(([0], np.cumsum(first.sum(axis=1))))
+        with warnings.catch_warnings():  # "sparse CSR support is in beta"
+            warnings.simplefilter("ignore", UserWarning)
+            return torch.sparse_csr_tensor(
+                torch.from_numpy(crow.astype(np.int32)),
+                torch.from_numpy(cols.ravel()[starts].astype(np.int32)),
+                torch.from_numpy(values),
+                size=(self.n_states, self.n_states),
+                check_invariants=False,
+            )
+
+    def _fold_collisions(self) -> None:
+        """``terminate`` mode: a step in which two pursuers meet ends the episode."""
+        a, n, s = self.a, self.n, self.n_states
+        cells = state_cells(self.scenario)
+        pair = pair_table(self.scenario) == 0
+        ok = np.ones((s,) + (a,) * n, dtype=bool)
+        for i in range(n):
+            for k in range(i + 1, n):
+                ai = np.arange(a).reshape((1,) * i + (a,) + (1,) * (n - 1 - i))
+                ak = np.arange(a).reshape((1,) * k + (a,) + (1,) * (n - 1 - k))
+                pi, pk = (cells[h].reshape((s,) + (1,) * n) for h in (i, k))
+                ok &= pair[pi, ai, pk, ak]
+        self.weight *= ok.reshape(s, -1)
+        self.matrix = self._csr(self.weight)
+        self._swap_entries()
+        del self.index, self.weight
+
+    def _general(self, x: np.ndarray) -> np.ndarray:
+        """All evader moves at once: ``x`` shifted along the evader's axis by each move,
+        side by side, times the matrix; minus the swaps."""
+        import torch
+
+        c, m, nb = self.c, x.shape[1], len(self.moves)
+        shifted = np.take(x.reshape(-1, c, m), self.emove, axis=1)  # (…, e, b, m)
+        shifted = shifted.reshape(self.n_states, nb * m)
+        out = (self.matrix @ torch.from_numpy(shifted)).numpy().reshape(-1, nb, m)
+        for b, (rows, cols, weight) in enumerate(self.swap_entries):
+            for col in range(m):
+                values = weight * shifted[cols, b * m + col]
+                out[:, b, col] -= np.bincount(rows, weights=values, minlength=self.n_states)
+        return out
 
     # ------------------------------------------------------------------ the operator
 
@@ -263,10 +300,9 @@ class PursuerStep:
         """``G (S, nb, m)`` of ``x (S, m)`` (``x`` zero where a pursuer is on the evader)."""
         if self.kind == "deterministic":
             return self.cont[..., None] * x[self.next]
+        if self.kind == "general":
+            return self._general(x)
         out = np.empty((self.n_states, len(self.moves), x.shape[1]))
         for b in range(len(self.moves)):
-            if self.kind == "product":
-                out[:, b] = self._product(x, b)
-            else:
-                self._general(x, b, out[:, b])
+            out[:, b] = self._product(x, b)
         return out

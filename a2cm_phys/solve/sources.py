@@ -54,10 +54,9 @@ def load_run(path: str | Path) -> tuple[Scenario, Any]:
 
     try:
         return load_trained(path)
-    except FileNotFoundError as err:
-        raise SourceError(str(err)) from None
     except (OSError, ValueError, KeyError, RuntimeError) as err:
-        raise SourceError(f"{path}: not a readable run ({err})") from None
+        message = str(err)  # most already name the path
+        raise SourceError(message if str(path) in message else f"{path}: {message}") from None
 
 
 def load_evader_run(path: str | Path) -> tuple[Scenario, Any]:
