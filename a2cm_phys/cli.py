@@ -179,10 +179,11 @@ def add_scenario_options(
     what = "scenario key, or train.KEY for a training option" if train else "scenario key"
     parser.add_argument(
         "--set",
-        action="append",
+        action="extend",
+        nargs="+",
         default=[],
         metavar="KEY=VALUE",
-        help=f"override a {what} (repeatable; values are TOML: -2, flee, true)",
+        help=f"override a {what} (one or more, repeatable; values are TOML: -2, flee, true)",
     )
     if train:
         from .config import PRESETS

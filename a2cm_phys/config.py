@@ -203,8 +203,11 @@ class Train:
     gae_lambda: float = 1.0
     normalize_advantages: bool = False
     value_norm: bool = False
+    value_norm_beta: float = 0.999
     split_rewards: bool = False
     balance_rewards: bool = True
+    collision_weight: float = 1.0
+    exploit_every: int = 0  # grid self-play: exact exploitability every K updates (0: off)
     log_std_init: float = 0.0
     lr_schedule: Schedule = "constant"
     constrain_collisions: bool = False
@@ -232,11 +235,13 @@ class Train:
                 raise _KeyError(key, f"must be >= 0, got {getattr(self, key)}")
         if not 0.0 <= self.rmsprop_alpha < 1.0:
             raise _KeyError("rmsprop_alpha", f"must be in [0, 1), got {self.rmsprop_alpha}")
+        if not 0.0 < self.value_norm_beta < 1.0:
+            raise _KeyError("value_norm_beta", f"must be in (0, 1), got {self.value_norm_beta}")
         if not 0.0 <= self.gae_lambda <= 1.0:
             raise _KeyError("gae_lambda", f"must be in [0, 1], got {self.gae_lambda}")
         if not self.adam_eps > 0:
             raise _KeyError("adam_eps", f"must be > 0, got {self.adam_eps}")
-        for key in ("collision_budget", "lagrange_lr"):
+        for key in ("collision_budget", "lagrange_lr", "collision_weight"):
             if getattr(self, key) < 0:
                 raise _KeyError(key, f"must be >= 0, got {getattr(self, key)}")
         if self.constrain_collisions and not (self.split_rewards and self.value_norm):

@@ -31,6 +31,7 @@ from .cli import SEED, Parser, add_scenario_options, int_range, run_cli, scenari
 from .config import ConfigError, Scenario, build, load_train
 from .envs.vector import VectorEnv
 from .policies import (
+    BEST_RESPONSE,
     EVADER_POLICIES,
     PURSUER_POLICIES,
     Matchup,
@@ -281,7 +282,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--evader",
-        help=f"a run directory with a learned evader or {'|'.join(EVADER_POLICIES)}"
+        help=f"a run directory with a learned evader, {'|'.join(EVADER_POLICIES)} or"
+        " best-response (exact, grids)"
         " (default: the scenario's); with --cross-play a comma-separated list",
     )
     p.add_argument(
@@ -324,7 +326,7 @@ def _scenario(args: argparse.Namespace, specs: Sequence[str | None]) -> Scenario
     if args.scenario:
         return scenario_from_args(args, train=False)
     for spec in specs:  # the first run among the policies names the game
-        if spec and spec not in PURSUER_POLICIES and spec not in EVADER_POLICIES:
+        if spec and spec not in (*PURSUER_POLICIES, *EVADER_POLICIES, BEST_RESPONSE):
             return load_run(spec).scenario
     raise ConfigError("named policies need --scenario (or a run directory)")
 

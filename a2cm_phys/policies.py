@@ -106,6 +106,9 @@ def pursuer_policy(name: str, scenario: Scenario) -> Policy:
 EVADER_POLICIES = ("random", "flee", "static")
 """Scripted evaders, played by the scenario's core."""
 
+BEST_RESPONSE = "best-response"
+"""The evader that is the exact best response to the pursuers (grids the oracle solves)."""
+
 
 @dataclass(frozen=True)
 class Matchup:
@@ -129,7 +132,9 @@ def matchup(
 
     pursuer_run = None if pursuers in PURSUER_POLICIES else load_run(pursuers)
     evader_model, evader_name = None, evader or scenario.evader
-    if evader is not None and evader not in EVADER_POLICIES:
+    if evader == BEST_RESPONSE:
+        evader_model, evader_name = best_response_evader(scenario, pursuers), "learned"
+    elif evader is not None and evader not in EVADER_POLICIES:
         run = load_run(evader)
         if run.evader is None:
             raise ConfigError(f"--evader {evader}: the run has no learned evader")
@@ -149,7 +154,28 @@ def matchup(
         pursuer_policy_, p_label = pursuer_policy(pursuers, game), pursuers
     e_label = _short(evader) if evader_model is not None and evader else evader_name
     e_policy = None if evader_model is None else model_policy(evader_model, greedy)
+    if evader == BEST_RESPONSE:  # deterministic: its table has one-hot rows
+        e_label, e_policy = BEST_RESPONSE, model_policy(evader_model, greedy=True)
     return Matchup(game, pursuer_policy_, e_policy, f"{p_label} vs {e_label} evader")
+
+
+def best_response_evader(scenario: Scenario, pursuers: str):
+    """The evader's exact best response to ``pursuers`` (a run directory, ``random`` or
+    ``oracle``), as a table policy with the actors' interface (grid scenarios only)."""
+    from .solve import TooLargeError, UnsupportedError
+    from .solve.best_response import evader_best_response
+    from .solve.sources import SourceError, pursuer_source
+    from .solve.tables import TablePolicy
+
+    if scenario.mode != "grid":
+        raise ConfigError("--evader best-response: exact best responses exist on grids only")
+    twin = grid_twin(scenario)
+    try:
+        table = pursuer_source(twin, pursuers).table
+        policy = evader_best_response(twin, table).policy
+    except (SourceError, TooLargeError, UnsupportedError) as err:
+        raise ConfigError(f"--evader best-response: {err}") from None
+    return TablePolicy(twin, policy)
 
 
 def _short(path: str | None) -> str:

@@ -38,6 +38,7 @@ from .config import (
     to_dict,
 )
 from .envs.vector import VectorEnv
+from .exploitability import exploitability, solvable
 from .rollout import StepHook, collect
 from .stats import EpisodeStats
 from .teams import make_teams
@@ -253,6 +254,10 @@ class Trainer:
         if self.evader is not None:
             evader_metrics = self.evader.learner.update(self.evader.batch, progress)
             self.last_metrics.update({f"evader_{k}": v for k, v in evader_metrics.items()})
+        every = self.cfg.exploit_every
+        if every and (self.update + 1) % every == 0 and solvable(self.scenario):
+            assert self.evader is not None
+            self.last_metrics.update(exploitability(self.scenario, self.model, self.evader.model))
         self.obs = obs
         self.stats.add(episodes)
         self.update += 1

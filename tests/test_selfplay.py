@@ -77,3 +77,22 @@ def test_self_play_resumes_bit_for_bit(tmp_path: Path) -> None:
     sa, sb = (json.loads((p / "summary.json").read_text()) for p in (full, part))
     for key in ("episodes", "mean_length_last_1000", "evader_mean_return_last_1000"):
         assert sa[key] == sb[key]
+
+
+def test_exploitability_is_logged_every_k_updates_on_small_grids(tmp_path: Path) -> None:
+    scenario = load_scenario("grid_vs", {"size": 3, "pursuers": 2, "max_steps": 50})
+    cfg = load_train({"num_envs": 4, "batch_size": 32, "updates": 4, "exploit_every": 2})
+    trainer = Trainer(scenario, cfg, tmp_path, record=False)
+    seen = []
+    update = trainer._one_update
+
+    def spy(on_step: object) -> None:
+        update(on_step)
+        seen.append("exploit_worst_case" in trainer.last_metrics)
+
+    trainer._one_update = spy  # type: ignore[method-assign]
+    assert trainer.run() == "done"
+    assert seen == [False, True, False, True]
+    worst, best = (trainer.last_metrics[k] for k in ("exploit_worst_case", "exploit_pursuers_br"))
+    # the best team against this evader is at least as fast as any team's worst case
+    assert 1.0 <= best <= worst <= 50.0

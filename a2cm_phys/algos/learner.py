@@ -88,7 +88,11 @@ class Learner:
         self.cfg = train_cfg
         self.optimizer = make_optimizer(model, train_cfg)
         self.device = next(model.parameters()).device
-        self.value_norm = ValueNorm(model.n_values) if train_cfg.value_norm else None
+        self.value_norm = (
+            ValueNorm(model.n_values, beta=train_cfg.value_norm_beta)
+            if train_cfg.value_norm
+            else None
+        )
         self.multiplier = 0.0  # the collision constraint's Lagrange multiplier λ ≥ 0
 
     def update(self, batch: Mapping[str, Any], progress: float = 0.0) -> dict[str, float]:
@@ -232,7 +236,9 @@ class Learner:
         """``(T, B, C, K)`` component advantages → ``(T, B, C)`` advantage of the actors."""
         if self.cfg.split_rewards and self.cfg.balance_rewards and self.value_norm is not None:
             _, std = self.value_norm.stats()
-            adv = adv / std.to(adv.dtype)
+            weight = torch.ones_like(std)
+            weight[1:] = self.cfg.collision_weight  # the collision component (REWARD_PARTS)
+            adv = adv * (weight / std).to(adv.dtype)
         if self.cfg.constrain_collisions:  # time + λ·(minus collisions), both normalised
             lam = self.multiplier
             combined = (adv[..., 0] + lam * adv[..., 1]) / (1.0 + lam)
