@@ -6,19 +6,22 @@ against A2CM), each labelled from its log's metadata. A RUN_DIR's log parts (a r
 writes ``episodes-from-NNNNNN.mcap``) are read as one run, each episode once (see
 :mod:`a2cm_phys.record.parts`); a file path is read alone. A damaged or empty log is an
 error, not an empty figure. Writes ``returns.png``, ``lengths.png``, ``collisions.png`` and
-``overview.png``.
+``overview.png``; and ``exploitability.png`` when a run logged exact exploitability (grid
+self-play: the evader's best response to the pursuers, i.e. their worst-case capture time,
+and the pursuers' best response to the learned evader, every K updates) against
+environment steps.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .cli import Parser, int_range, run_cli, writable_dir
-from .record.reader import LogError, read_run
+from .record.reader import LogError, RunLog, read_run
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#17becf")
 SERIES = (
@@ -27,6 +30,12 @@ SERIES = (
     ("collisions", "collisions.png", "Collisions per episode", "pursuer collisions"),
 )
 """(column, file, title, y label) of each figure."""
+EXPLOIT_SERIES = (
+    ("exploit_worst_case", "evader's best response (pursuers' worst case)", "-"),
+    ("exploit_pursuers_br", "pursuers' best response to the learned evader", "--"),
+)
+"""(update metric, legend text, line style) of the exploitability figure."""
+EXPLOIT_FILE = "exploitability.png"
 
 
 @dataclass
@@ -37,6 +46,8 @@ class Run:
     title: str
     columns: dict[str, np.ndarray]
     clean: bool
+    exploit: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    """Sparse update metrics of :data:`EXPLOIT_SERIES`: ``(env_steps, values)`` where logged."""
 
 
 def log_files(path: Path) -> list[Path]:
@@ -69,7 +80,25 @@ def load_run(path: Path) -> Run:
     columns = {k: log.episodes[k] for k in ("return", "length", "collisions", "captured")}
     sc = log.scenario
     title = f"{sc.name} ({sc.mode}, collisions {sc.collisions.mode}, {sc.evader} evader)"
-    return Run(label=log.label, title=title, columns=columns, clean=log.clean)
+    return Run(
+        label=log.label, title=title, columns=columns, clean=log.clean, exploit=_exploit(log)
+    )
+
+
+def _exploit(log: RunLog) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each exploitability metric's ``(env_steps, values)`` over the updates that logged it
+    (a finite value; absent, null or NaN elsewhere)."""
+    out = {}
+    for key, _, _ in EXPLOIT_SERIES:
+        pairs = [
+            (u["env_steps"], float(u[key]))
+            for u in log.updates
+            if isinstance(u.get(key), (int, float)) and np.isfinite(u[key])
+        ]
+        if pairs:
+            steps, values = np.array(pairs, dtype=np.float64).T
+            out[key] = (steps, values)
+    return out
 
 
 def moving_average(values: np.ndarray, window: int) -> np.ndarray:
@@ -146,7 +175,38 @@ def plot_runs(runs: list[Run], labels: list[str], out: Path, window: int) -> lis
     fig.suptitle(f"Learning curves (moving average over {window}){suffix}", fontsize=11)
     fig.savefig(out / "overview.png")
     written.append(out / "overview.png")
+    if any(r.exploit for r in runs):
+        fig = Figure(figsize=(9, 4.8), dpi=120, layout="constrained")
+        ax = fig.add_subplot()
+        _draw_exploit(ax, runs, labels)
+        ax.set_title(f"Exploitability (exact best responses){suffix}", fontsize=10)
+        fig.savefig(out / EXPLOIT_FILE)
+        written.append(out / EXPLOIT_FILE)
     return written
+
+
+def _draw_exploit(ax: object, runs: list[Run], labels: list[str]) -> None:
+    """Each run's exploitability metrics against environment steps (one colour per run)."""
+    for i, (run, label) in enumerate(zip(runs, labels, strict=True)):
+        colour = COLOURS[i % len(COLOURS)]
+        for key, what, style in EXPLOIT_SERIES:
+            if key not in run.exploit:
+                continue
+            steps, values = run.exploit[key]
+            ax.plot(
+                steps,
+                values,
+                style,
+                color=colour,
+                marker="o",
+                ms=3,
+                lw=1.6,
+                label=f"{label}: {what}, last {values[-1]:.4g}",
+            )
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("expected capture time (steps)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8, framealpha=0.85)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

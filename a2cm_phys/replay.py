@@ -3,11 +3,13 @@
 Without options: a summary of the run (episodes, steps, captures, collisions, mean length
 and return) over time, by tenths of the run. ``--episode N …`` prints episodes (``--render
 text``, the default) or draws them (``--render gif`` an animation, ``--render png`` a
-contact sheet; ``--out`` names the file). ``--verify`` re-simulates the logged episodes
-(or the ``--episode`` ones) from their seeds and the pursuers' actions with the scenario
-stored in the log, and exits 1 on any divergence. ``--export-foxglove OUT.mcap`` writes
-``foxglove.SceneUpdate`` frames of the chosen (default: all logged) episodes, one after
-the other on topic ``/scene``. Errors (missing file, not a run log, unknown episode) print
+contact sheet; ``--out`` names the file; physics episodes are drawn with each agent's path
+as a trail). ``--verify`` re-simulates the logged episodes (or the ``--episode`` ones) from
+their seeds and the logged actions (the pursuers' moves or commands, and a learned
+evader's) with the scenario stored in the log, and exits 1 on any divergence.
+``--export-foxglove OUT.mcap`` writes ``foxglove.SceneUpdate`` frames of the chosen
+(default: all logged) episodes, one after the other on topic ``/scene``, at the control
+rate. Errors (missing file, not a run log, unknown episode) print
 one message and exit 2.
 """
 
@@ -23,6 +25,7 @@ from .cli import Parser, UsageError, int_range, output_file, positive_float, run
 from .config import Scenario
 from .envs.core import ACTION_NAMES
 from .record.reader import RunLog, Trajectory, read_run
+from .record.schemas import step_seconds
 from .record.verify import verify, verify_trajectory
 
 __all__ = ["EXPORT_TOPIC", "describe", "export_foxglove", "main", "summary_table", "verify",
@@ -54,11 +57,16 @@ def summary_table(log: RunLog, parts: int = 10) -> str:
     ]
     rows = [(f"{100 * k // parts}–{100 * (k + 1) // parts}%", which == k) for k in range(parts)]
     rows.append(("all", np.ones_like(which, dtype=bool)))
+    evader = ep.get("evader_return")
+    if evader is not None:
+        lines[0] += " mean evader return |"
+        lines[1] += " ---: |"
     for k, (name, mask) in enumerate(rows):
         n = int(mask.sum())
         span = f"{edges[k]:.0f}–{edges[k + 1]:.0f}" if k < parts else f"0–{end:.0f}"
         if not n:
-            lines.append(f"| {name} | {span} | 0 | 0 | | | | | | |")
+            empty = " |" if evader is not None else ""
+            lines.append(f"| {name} | {span} | 0 | 0 | | | | | | |{empty}")
             continue
         cap, trunc = int(ep["captured"][mask].sum()), int(ep["truncated"][mask].sum())
         col = int(ep["collisions"][mask].sum())
@@ -66,6 +74,7 @@ def summary_table(log: RunLog, parts: int = 10) -> str:
             f"| {name} | {span} | {n} | {int(ep['length'][mask].sum())} "
             f"| {cap} ({100 * cap / n:.0f}%) | {trunc} | {col} | {col / n:.2f} "
             f"| {ep['length'][mask].mean():.1f} | {ep['return'][mask].mean():.4g} |"
+            + (f" {evader[mask].mean():.4g} |" if evader is not None else "")
         )
     return "\n".join(lines)
 
@@ -98,7 +107,8 @@ def describe(log: RunLog) -> str:
         f"{log.n_episodes} episodes ({logged} with trajectories), "
         f"{int(log.episodes['length'].sum())} env steps, {len(log.updates)} updates",
         f"scenario {sc.name}: {sc.mode}, {sc.size}x{sc.size}, {sc.pursuers} pursuers, "
-        f"{sc.evader} evader, collisions {sc.collisions.mode}, max_steps {sc.max_steps}",
+        f"{sc.evader} evader, collisions {sc.collisions.mode}, max_steps {sc.max_steps}"
+        + (f", {sc.control} control every {step_seconds(sc):g} s" if sc.mode == "physics" else ""),
         f"label {log.label} · seed {meta.get('seed', '?')} · a2cm_phys {meta.get('version', '?')}"
         f" · {meta.get('created', '')}",
         f"command: {meta.get('command', '?')}",
@@ -132,24 +142,35 @@ def _ranges_text(ids: Sequence[int], limit: int = 6) -> str:
     return shown + (f", … ({len(ids)} in all)" if len(ids) > limit else "")
 
 
+def action_text(action: np.ndarray) -> str:
+    """One agent's action: a move's name, or a command ``(vx,vy)`` (fractions of max_speed)."""
+    if np.ndim(action):
+        return f"({action[0]:+.2f},{action[1]:+.2f})"
+    return ACTION_NAMES[int(action)]
+
+
 def episode_text(scenario: Scenario, traj: Trajectory) -> str:
     """Every state of an episode as a text board, with the actions that led to it."""
     from .render import render_text
 
     n = scenario.pursuers
+    evader_return = (
+        "" if traj.evader_reward is None else f", evader return {traj.evader_reward.sum():g}"
+    )
     out = [
-        f"episode {traj.episode}: env {traj.env}, seed {traj.seed}, {traj.length} steps, "
-        f"return {traj.reward.sum():g}, {'captured' if traj.captured.any() else 'not captured'}"
+        f"episode {traj.episode}: env {traj.env}, seed {traj.seed}, {traj.length} steps "
+        f"({traj.length * traj.dt:g} s), return {traj.reward.sum():g}{evader_return}, "
+        f"{'captured' if traj.captured.any() else 'not captured'}"
         f", {int(traj.collisions.sum())} collisions"
     ]
     for k in range(traj.length + 1):
         head = f"t={k}"
         if k:
-            acts = " ".join(f"{i}:{ACTION_NAMES[a]}" for i, a in enumerate(traj.actions[k - 1, :n]))
-            head += (
-                f"  actions {acts} E:{ACTION_NAMES[traj.actions[k - 1, n]]}"
-                f"  reward {traj.reward[k - 1]:g}"
-            )
+            row = traj.actions[k - 1]
+            acts = " ".join(f"{i}:{action_text(a)}" for i, a in enumerate(row[:n]))
+            head += f"  actions {acts} E:{action_text(row[n])}  reward {traj.reward[k - 1]:g}"
+            if traj.evader_reward is not None:
+                head += f"  evader reward {traj.evader_reward[k - 1]:g}"
             if traj.captured[k - 1]:
                 head += "  CAPTURED"
             if traj.collisions[k - 1]:
@@ -159,17 +180,25 @@ def episode_text(scenario: Scenario, traj: Trajectory) -> str:
 
 
 def episode_frames(scenario: Scenario, traj: Trajectory, max_frames: int) -> list[np.ndarray]:
-    """RGB frames of (at most ``max_frames`` evenly spaced) states of an episode."""
+    """RGB frames of (at most ``max_frames`` evenly spaced) states of an episode. Physics
+    episodes show each agent's path so far as a trail: every state up to the frame's, also
+    the ones between frames, so a continuous path is drawn whole however few frames."""
     from .render import render_rgb
 
     states = np.unique(np.linspace(0, traj.length, min(max_frames, traj.length + 1)).round())
+    trails = scenario.mode == "physics"
     frames = []
     for k in states.astype(int):
         vel = None if traj.velocities is None else traj.velocities[k]
         title = f"episode {traj.episode}  step {k}/{traj.length}"
+        if traj.dt != 1.0:
+            title += f"  t={k * traj.dt:.1f} s"
         if k == traj.length and traj.captured[-1]:
             title += "  captured"
-        frames.append(render_rgb(scenario, traj.positions[k], vel, title=title, pixels=240))
+        trail = traj.positions[:k] if trails else None
+        frames.append(
+            render_rgb(scenario, traj.positions[k], vel, title=title, pixels=240, trail=trail)
+        )
     return frames
 
 

@@ -11,6 +11,7 @@ from test_record import make_log
 from test_replay import damage_a_chunk
 
 from a2cm_phys.plot import load_run, log_files, main, moving_average
+from a2cm_phys.record import read_run
 from a2cm_phys.record.parts import new_part
 
 
@@ -89,3 +90,33 @@ def test_moving_average() -> None:
 def test_missing_run_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main([str(tmp_path / "nope")]) == 2
     assert "error:" in capsys.readouterr().err
+
+
+def test_exploitability_is_drawn_from_sparse_update_metrics(tmp_path: Path) -> None:
+    every = 5  # the trainer computes both best responses every K updates
+    metrics = {
+        u: {"exploit_worst_case": 9.5 - u / 4, "exploit_pursuers_br": 2.5 + u / 10}
+        for u in range(0, 20, every)
+    }
+    metrics[10]["exploit_pursuers_br"] = float("nan")  # logged as null: skipped
+    make_log(tmp_path / "sp" / "episodes.mcap", steps=160, metrics=metrics, log_every=0)
+    make_log(tmp_path / "plain" / "episodes.mcap", steps=160, log_every=0)
+    updates = read_run(tmp_path / "sp").updates
+    assert [u["update"] for u in updates if "exploit_worst_case" in u] == [0, 5, 10, 15]
+    assert updates[10]["exploit_pursuers_br"] is None
+    run = load_run(tmp_path / "sp")
+    steps, values = run.exploit["exploit_worst_case"]
+    assert steps.tolist() == [(u + 1) * 8 * 4 for u in (0, 5, 10, 15)]  # env steps, 4 games
+    assert values.tolist() == [9.5, 8.25, 7.0, 5.75]
+    assert run.exploit["exploit_pursuers_br"][1].tolist() == [2.5, 3.0, 4.0]
+    assert load_run(tmp_path / "plain").exploit == {}
+
+    out = tmp_path / "figs"
+    assert main([str(tmp_path / "sp"), str(tmp_path / "plain"), "--out", str(out)]) == 0
+    with Image.open(out / "exploitability.png") as im:
+        pixels = np.asarray(im.convert("RGB")).reshape(-1, 3)
+        assert im.size[0] > 500
+        # the first run's colour (matplotlib's blue) draws its curves
+        assert np.sum(np.all(np.abs(pixels.astype(int) - (31, 119, 180)) < 8, axis=1)) > 200
+    main([str(tmp_path / "plain"), "--out", str(tmp_path / "none")])
+    assert not (tmp_path / "none" / "exploitability.png").exists()

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import jsonschema
@@ -16,7 +17,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from a2cm_phys.config import load_scenario, to_dict
+from a2cm_phys.config import Scenario, load_scenario, to_dict
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.record import EpisodeRecorder, LogError, RunLog, read_run
 from a2cm_phys.record.schemas import (
@@ -39,6 +40,24 @@ def validator(schema: dict) -> jsonschema.Validator:
     return cls(schema)
 
 
+def random_actions(
+    sc: Scenario, rng: np.random.Generator, envs: int
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Random pursuer actions and (with a learned evader) evader actions for one vector step:
+    moves, or float32 commands partly outside the unit disc (the env clips them), with an
+    exact ``-0.0`` now and then, as a policy's output would be."""
+    if sc.continuous:
+        actions = rng.uniform(-1.4, 1.4, size=(envs, sc.pursuers, 2)).astype(np.float32)
+        actions[rng.random(actions.shape) < 0.05] = np.float32(-0.0)
+    else:
+        actions = rng.integers(0, sc.actions, size=(envs, sc.pursuers))
+    if sc.evader != "learned":
+        return actions, None
+    if sc.continuous:
+        return actions, rng.uniform(-1.4, 1.4, size=(envs, 2)).astype(np.float32)
+    return actions, rng.integers(0, sc.actions, size=envs)
+
+
 def make_log(
     path: Path,
     scenario: str = "grid",
@@ -48,11 +67,17 @@ def make_log(
     updates_every: int = 8,
     algo: str = "a2cm",
     label: str | None = "test run",
+    overrides: dict | None = None,
+    metrics: dict[int, dict] | None = None,
+    policy: Callable[..., tuple[np.ndarray, np.ndarray | None]] | None = None,
     **recorder: object,
 ) -> dict:
-    """Drive a VectorEnv with random actions while recording; return what the env produced
-    (finished episodes in order, each with its step-by-step data) to compare with."""
-    sc = load_scenario(scenario)
+    """Drive a VectorEnv with random actions (or ``policy(scenario, rng, envs)``'s) while
+    recording; return what the env produced (finished episodes in order, each with its
+    step-by-step data) to compare with. ``metrics`` adds metrics to the updates whose
+    number it holds."""
+    policy = policy or random_actions
+    sc = load_scenario(scenario, overrides)
     env = VectorEnv(sc, envs)
     rng = np.random.default_rng(seed)
     obs = env.reset(seed)
@@ -69,6 +94,7 @@ def make_log(
             "wall": [],
             "vel": None if v is None else [v[i]],
             "events": [],
+            "erew": [],
         }
 
     current = [fresh(i) for i in range(envs)]
@@ -78,14 +104,16 @@ def make_log(
     with EpisodeRecorder(path, sc, meta, **recorder) as rec:
         rec.start(env, obs)
         for k in range(steps):
-            actions = rng.integers(0, sc.actions, size=(envs, sc.pursuers))
-            step = env.step(actions)
+            actions, evader_actions = policy(sc, rng, envs)
+            step = env.step(actions, evader_actions)
             rec.record_step(actions, step)
             out = step.outcome
             for i in range(envs):
                 c = current[i]
                 c["pos"].append(step.positions[i].copy())
-                c["act"].append(np.append(actions[i], out.evader_action[i]))
+                c["act"].append(np.concatenate([actions[i], out.evader_action[i][None]]))
+                if step.evader_reward is not None:
+                    c["erew"].append(step.evader_reward[i])
                 c["rew"].append(out.reward[i])
                 c["cap"].append(out.captured[i])
                 c["col"].append(out.collisions[i])
@@ -98,14 +126,15 @@ def make_log(
                 finished.append((e, current[e.env]))
                 current[e.env] = fresh(e.env)
             if updates_every and k % updates_every == updates_every - 1:
-                metrics = {
+                logged = {
                     "policy_loss": float(k),
                     "value_loss": np.float32(0.5),
                     "entropy": 1.25,
                     "grad_norm": float("nan"),
+                    **(metrics or {}).get(k // updates_every, {}),
                 }
-                rec.record_update(k // updates_every, metrics)
-                updates.append(metrics)
+                rec.record_update(k // updates_every, logged)
+                updates.append(logged)
     return {"scenario": sc, "finished": finished, "updates": updates, "envs": envs}
 
 
@@ -161,11 +190,19 @@ def test_metadata_holds_scenario_and_provenance(grid_log: tuple[Path, dict]) -> 
 
 def test_every_message_matches_its_schema(grid_log: tuple[Path, dict]) -> None:
     path, _ = grid_log
+    seen = check_messages(path)
+    assert {TRAJECTORY_TOPIC, SUMMARY_TOPIC, UPDATE_TOPIC} <= set(seen)
+    assert any(t.startswith(SCENE_TOPIC_PREFIX) for t in seen)
+
+
+def check_messages(path: Path) -> dict[str, list[tuple[int, dict]]]:
+    """Validate every message of a log against its stored schema (and scenes against
+    Foxglove's own), check each channel's times never go back; return each topic's
+    ``(log_time, message)`` list."""
     assert FOXGLOVE_SCENE.exists(), f"Foxglove's schema is expected at {FOXGLOVE_SCENE}"
     official = validator(json.loads(FOXGLOVE_SCENE.read_text()))
     stored: dict[int, jsonschema.Validator] = {}
-    seen: dict[str, int] = {}
-    times: dict[str, list[int]] = {}
+    seen: dict[str, list[tuple[int, dict]]] = {}
     with open(path, "rb") as fh:
         for schema, channel, message in make_reader(fh).iter_messages(log_time_order=False):
             doc = json.loads(message.data)
@@ -183,12 +220,11 @@ def test_every_message_matches_its_schema(grid_log: tuple[Path, dict]) -> None:
                 official.validate(doc)
                 ids = {e["id"] for e in doc["entities"]}
                 assert {"arena", "pursuer_0", "evader"} <= ids
-            seen[channel.topic] = seen.get(channel.topic, 0) + 1
-            times.setdefault(channel.topic, []).append(message.log_time)
-    assert {TRAJECTORY_TOPIC, SUMMARY_TOPIC, UPDATE_TOPIC} <= set(seen)
-    assert any(t.startswith(SCENE_TOPIC_PREFIX) for t in seen)
-    for topic, ts in times.items():  # each channel's log times never go back
-        assert ts == sorted(ts), topic
+            seen.setdefault(channel.topic, []).append((message.log_time, doc))
+    for topic, messages in seen.items():  # each channel's log times never go back
+        times = [t for t, _ in messages]
+        assert times == sorted(times), topic
+    return seen
 
 
 def test_scene_frames_cover_every_state_of_drawn_episodes(grid_log: tuple[Path, dict]) -> None:

@@ -28,12 +28,18 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def rewrite(
-    src: Path, dst: Path, edit: Callable[[dict], None], topic: str = TRAJECTORY_TOPIC
+    src: Path,
+    dst: Path,
+    edit: Callable[[dict], None],
+    topic: str = TRAJECTORY_TOPIC,
+    every: bool = False,
+    metadata: Callable[[dict], None] | None = None,
 ) -> None:
-    """Copy an MCAP file through the mcap library, editing the first message of ``topic``."""
+    """Copy an MCAP file through the mcap library, editing the first message of ``topic``
+    (``every``: all of them), and the run's metadata record with ``metadata``."""
     with open(src, "rb") as fh:
         reader = make_reader(fh)
-        metadata = list(reader.iter_metadata())
+        metadata_records = list(reader.iter_metadata())
     with open(src, "rb") as fh:
         messages = list(make_reader(fh).iter_messages(log_time_order=False))
     schemas: dict[int, int] = {}
@@ -42,8 +48,11 @@ def rewrite(
     with open(dst, "wb") as out:
         writer = Writer(out)
         writer.start()
-        for m in metadata:
-            writer.add_metadata(m.name, m.metadata)
+        for m in metadata_records:
+            values = dict(m.metadata)
+            if metadata is not None:
+                metadata(values)
+            writer.add_metadata(m.name, values)
         for schema, channel, message in messages:
             if schema.id not in schemas:
                 schemas[schema.id] = writer.register_schema(
@@ -54,7 +63,7 @@ def rewrite(
                     channel.topic, channel.message_encoding, schemas[schema.id]
                 )
             data = message.data
-            if channel.topic == topic and not edited:
+            if channel.topic == topic and (every or not edited):
                 doc = json.loads(data)
                 edit(doc)
                 data, edited = json.dumps(doc).encode(), True

@@ -71,14 +71,15 @@ def read_run_dir(run_dir: str | Path) -> RunLog:
     merged = logs[0]
     if len(logs) == 1:
         return replace(merged, parts=files)
-    columns: dict[str, list[np.ndarray]] = {k: [] for k in merged.episodes}
+    # Optional columns (``evader_return``) absent from a part (e.g. one with no episode) are NaN.
+    columns: dict[str, list[np.ndarray]] = {k: [] for lg in logs for k in lg.episodes}
     updates, blocks, where = [], [], {}
     for i, lg in enumerate(logs):
         end_episode, end_update = starts[i + 1] if i + 1 < len(logs) else (None, None)
         ids = lg.episodes["episode"]
         keep = np.ones(len(ids), dtype=bool) if end_episode is None else ids < end_episode
         for k in columns:
-            columns[k].append(lg.episodes[k][keep])
+            columns[k].append(lg.episodes.get(k, np.full(len(ids), np.nan))[keep])
         updates += [u for u in lg.updates if end_update is None or u["update"] <= end_update]
         offset = len(blocks)
         blocks += lg._blocks

@@ -4,7 +4,9 @@ The file is read in one pass with the ``mcap`` library's :class:`~mcap.stream_re
 (CRCs checked), which needs no summary section. A run killed mid-write leaves a file that
 ends in a partial record: reading stops there, everything in the complete chunks before it
 is kept, and :attr:`RunLog.clean` is ``False``. The writer puts every message of an episode
-in one chunk, so an episode is either recovered whole or not at all.
+in one chunk, so an episode is either recovered whole or not at all. Logs of every format
+version up to :data:`~.schemas.FORMAT_VERSION` are read (see :mod:`.schemas`); a newer one
+is a :class:`LogError`.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from mcap.writer import MCAP0_MAGIC
 from ..cli import UsageError
 from ..config import ConfigError, Scenario, build
 from .schemas import (
+    FORMAT_VERSION,
     METADATA_NAME,
     SCENE_TOPIC_PREFIX,
     SUMMARY_SCHEMA,
@@ -44,7 +47,12 @@ class LogError(UsageError):
 @dataclass
 class Trajectory:
     """One episode as logged: ``positions``/``velocities`` have ``length + 1`` rows (row 0
-    is the start), the per-step arrays ``length`` rows. Agents: pursuers, then the evader."""
+    is the start), the per-step arrays ``length`` rows. Agents: pursuers, then the evader.
+
+    ``actions`` are ``(L, N + 1)`` int64 moves, or with continuous control ``(L, N + 1, 2)``
+    float64 commands, exactly as given to the env (before clipping). ``dt`` is the simulated
+    seconds per step (the control period). ``evader_reward`` is a learned evader's reward
+    per step (``None`` with a scripted evader, or in a log older than format 2)."""
 
     episode: int
     env: int
@@ -52,13 +60,19 @@ class Trajectory:
     t0: float
     dt: float
     positions: np.ndarray  # (L + 1, N + 1, 2)
-    actions: np.ndarray  # (L, N + 1) int64: pursuers, then the evader
+    actions: np.ndarray  # (L, N + 1) int64 or (L, N + 1, 2) float64: pursuers, then evader
     reward: np.ndarray  # (L,) float64
     captured: np.ndarray  # (L,) bool
     collisions: np.ndarray  # (L,) int64
     wall_contacts: np.ndarray  # (L,) int64
     velocities: np.ndarray | None = None  # (L + 1, N + 1, 2), physics only
     events: list[tuple[str, str, str, int]] | None = None  # physics only
+    evader_reward: np.ndarray | None = None  # (L,) float64, learned evader only
+
+    @property
+    def continuous(self) -> bool:
+        """Whether the actions are continuous commands (float vectors)."""
+        return self.actions.ndim == 3
 
     @property
     def length(self) -> int:
@@ -76,7 +90,10 @@ class Trajectory:
         pos = pos.reshape(len(pos), agents, 2)
         vel = doc.get("velocities")
         vel = None if vel is None else np.asarray(vel, dtype=np.float64).reshape(pos.shape)
-        act = np.asarray(doc["actions"], dtype=np.int64).reshape(-1, agents)
+        act = _actions(doc["actions"], agents)
+        evader_reward = doc.get("evader_reward")
+        if evader_reward is not None:
+            evader_reward = np.asarray(evader_reward, dtype=np.float64)
         reward = np.asarray(doc["reward"], dtype=np.float64)
         captured = np.asarray(doc["captured"], dtype=bool)
         collisions = np.asarray(doc["collisions"], dtype=np.int64)
@@ -101,13 +118,24 @@ class Trajectory:
                     wall_contacts=walls[c:d],
                     velocities=None if vel is None else vel[a:b],
                     events=None if events is None else [tuple(e) for e in events[j]],
+                    evader_reward=None if evader_reward is None else evader_reward[c:d],
                 )
             )
         return out
 
 
+def _actions(rows: list[list[Any]], agents: int) -> np.ndarray:
+    """The ``actions`` rows of a block: ``agents`` moves a row (int64), or ``2 · agents``
+    command components a row (float64 ``(steps, agents, 2)``; ``null`` reads as NaN)."""
+    width = len(rows[0]) if rows else agents
+    if width == 2 * agents:
+        return np.asarray(rows, dtype=np.float64).reshape(-1, agents, 2)
+    return np.asarray(rows, dtype=np.int64).reshape(-1, agents)
+
+
 SUMMARY_FIELDS = tuple(k for k in SUMMARY_SCHEMA["required"] if k != "seed")
-"""Columns of :attr:`RunLog.episodes` besides ``seed``."""
+"""Columns of :attr:`RunLog.episodes` besides ``seed`` (plus ``evader_return`` in logs of
+learned-evader runs)."""
 
 
 @dataclass
@@ -115,7 +143,8 @@ class RunLog:
     """Everything read from one run log.
 
     ``episodes`` holds the summaries column-wise (numpy arrays keyed by
-    :data:`SUMMARY_FIELDS` and ``seed``), in episode order. ``updates`` is the list of update
+    :data:`SUMMARY_FIELDS` and ``seed``, and ``evader_return`` if the log has it), in
+    episode order. ``updates`` is the list of update
     messages. ``metadata`` the run's metadata (values decoded from JSON).
     """
 
@@ -260,6 +289,7 @@ def read_file(path: str | Path) -> RunLog:
                 error, got = _read_around_damage(fh, got, error)
     if not got.metadata:
         raise LogError(f"{path}: not an a2cm_phys run log (no '{METADATA_NAME}' metadata)")
+    _check_format(path, got.metadata.get("format"))
     return RunLog(
         path=path,
         metadata=got.metadata,
@@ -335,6 +365,18 @@ def _episode_ids(data: bytes) -> list[int]:
     return json.loads(data)["episode"]
 
 
+def _check_format(path: Path, tag: object) -> None:
+    """A :class:`LogError` if the log was written in a newer format than this package reads."""
+    if not isinstance(tag, str) or "/" not in tag:
+        return
+    version = tag.rsplit("/", 1)[1]
+    if version.isdigit() and int(version) > FORMAT_VERSION:
+        raise LogError(
+            f"{path}: log format {tag} is newer than this a2cm_phys reads "
+            f"(up to version {FORMAT_VERSION}); upgrade a2cm_phys"
+        )
+
+
 def _describe(err: BaseException) -> str:
     name = type(err).__name__
     text = str(err)
@@ -356,6 +398,10 @@ def _columns(blocks: list[dict[str, Any]]) -> dict[str, np.ndarray]:
         for k in SUMMARY_FIELDS
     }
     cols["seed"] = np.array([int(v) for b in blocks for v in b["seed"]], dtype=np.uint64)
+    if blocks and all("evader_return" in b for b in blocks):
+        cols["evader_return"] = np.array(
+            [v for b in blocks for v in b["evader_return"]], dtype=np.float64
+        )
     return cols
 
 

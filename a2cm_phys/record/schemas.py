@@ -13,13 +13,21 @@ the block's episodes concatenated in episode order (``length`` splits them). Eve
 finished episode has a summary; every ``log_every``-th (by id) a trajectory.
 
 Times: the log's clock is the run's simulated time. All games of a vector env step in
-lockstep, one step being ``STEP_SECONDS`` of simulated time in both modes (SPEC §3), so
-vector step ``k`` happens at ``k · STEP_SECONDS`` in every game: that is each game's
-cumulative simulated time, and the clock of every ``log_time``. A block is logged at the
-end of its last episode, an update at the step it was recorded, a scene frame at the time
-of the state it shows. Each channel's log times are non-decreasing. The Foxglove schema is
-generated here: a subset of ``foxglove.SceneUpdate`` with every field the official schema
-requires.
+lockstep, one step being :func:`step_seconds` of simulated time (1 s on the grid, the
+control period ``physics.dt`` in physics mode: 1 s for discrete moves, 0.1 s by default
+for continuous commands), so vector step ``k`` happens at ``k · step_seconds`` in every
+game: that is each game's cumulative simulated time, and the clock of every ``log_time``.
+A block is logged at the end of its last episode, an update at the step it was recorded, a
+scene frame at the time of the state it shows (scenes thus play at the control rate).
+Each channel's log times are non-decreasing. The Foxglove schema is generated here: a
+subset of ``foxglove.SceneUpdate`` with every field the official schema requires.
+
+Format versions (metadata ``format``; :mod:`.reader` reads both):
+
+- ``a2cm_phys.episodes/1``: integer actions only; one step = 1 s.
+- ``a2cm_phys.episodes/2``: continuous commands as float actions; ``dt`` and the clock
+  follow the control period; a learned evader's reward and return (``evader_reward``,
+  ``evader_return``); sparse update metrics (``exploit_*``) documented.
 """
 
 from __future__ import annotations
@@ -27,8 +35,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-STEP_SECONDS = 1.0
-"""Simulated seconds per environment step (both modes)."""
+from ..config import Scenario
 
 TRAJECTORY_TOPIC = "/episodes/trajectories"
 """Blocks of logged episodes, step by step (:data:`TRAJECTORY_SCHEMA`)."""
@@ -40,8 +47,17 @@ SCENE_TOPIC_PREFIX = "/scene/env_"
 """``foxglove.SceneUpdate`` frames of the drawn episodes of game ``i``: ``/scene/env_<i>``."""
 METADATA_NAME = "a2cm_phys"
 """Name of the MCAP metadata record holding the run's scenario, config and provenance."""
-FORMAT = "a2cm_phys.episodes/1"
-"""Format tag stored in the metadata; bump on incompatible changes."""
+FORMAT = "a2cm_phys.episodes/2"
+"""Format tag stored in the metadata; bump on incompatible changes (history above)."""
+FORMAT_VERSION = 2
+"""The version number in :data:`FORMAT`: the newest this package reads."""
+
+
+def step_seconds(scenario: Scenario) -> float:
+    """Simulated seconds per environment step: 1 on the grid, ``physics.dt`` in physics mode."""
+    if scenario.mode != "physics" or scenario.physics.dt is None:
+        return 1.0
+    return float(scenario.physics.dt)
 
 
 def scene_topic(env: int) -> str:
@@ -73,9 +89,10 @@ _PER_EPISODE = {
 TRAJECTORY_SCHEMA: dict[str, Any] = {
     "title": "a2cm_phys.TrajectoryBlock",
     "description": "Logged episodes, step by step, column-wise. Each re-simulates from its seed "
-    "and the pursuers' actions. State arrays hold length+1 rows per episode (its start, then "
-    "the state after each step); step arrays length rows; both concatenated in episode "
-    "order. Agents: pursuers in order, then the evader.",
+    "and the logged actions (the pursuers', and a learned evader's). State arrays hold "
+    "length+1 rows per episode (its start, then the state after each step); step arrays "
+    "length rows; both concatenated in episode order. Agents: pursuers in order, then the "
+    "evader.",
     "type": "object",
     "properties": {
         **_PER_EPISODE,
@@ -84,8 +101,18 @@ TRAJECTORY_SCHEMA: dict[str, Any] = {
         "time": _array("number", "state rows: simulated time since the episode's start (s)"),
         "positions": _rows("number", "state rows: x0,y0,x1,y1,… (grid: cells; physics: m)"),
         "velocities": _rows("number", "physics only; state rows: vx0,vy0,… (m/s)"),
-        "actions": _rows("integer", "step rows: each pursuer's action, then the evader's"),
-        "reward": _array("number", "step rows: raw team reward"),
+        "actions": _rows(
+            "number",
+            "step rows: each pursuer's action, then the evader's. Discrete control: N + 1 "
+            "integer moves. Continuous control: 2(N + 1) numbers vx0,vy0,…,vxE,vyE, the "
+            "commands as given to the env (fractions of max_speed, before clipping to the "
+            "unit disc), each the shortest text that reads back as the same float64 (float32 "
+            "commands are exact float64 values); null for a non-finite one",
+        ),
+        "reward": _array("number", "step rows: raw team reward (the pursuers')"),
+        "evader_reward": _array(
+            "number", "learned evader only; step rows: the evader's reward (rewards.evader)"
+        ),
         "captured": _array("boolean", "step rows: capture in this step"),
         "collisions": _array("integer", "step rows: pursuer pairs that collided"),
         "wall_contacts": _array("integer", "step rows: pursuer moves/contacts against a wall"),
@@ -129,7 +156,8 @@ SUMMARY_SCHEMA: dict[str, Any] = {
     "type": "object",
     "properties": {
         **_PER_EPISODE,
-        "return": _array("number", "sum of the raw team rewards"),
+        "return": _array("number", "sum of the raw team rewards (the pursuers' return)"),
+        "evader_return": _array("number", "learned evader only: the sum of its rewards"),
         "captured": _array("boolean", "ended by a capture"),
         "truncated": _array("boolean", "reached max_steps"),
         "collision_terminated": _array("boolean", "ended by a collision"),
@@ -167,6 +195,14 @@ UPDATE_METRICS = (
 )
 """Metrics the trainer is expected to report per update (others are allowed)."""
 
+SPARSE_METRICS = {
+    "exploit_worst_case": "grid self-play, every K updates: the evader's exact best response "
+    "to the current pursuers, their worst-case expected capture time (steps)",
+    "exploit_pursuers_br": "grid self-play, every K updates: the pursuers' exact best response "
+    "to the current learned evader, its expected capture time (steps)",
+}
+"""Metrics present only in the updates where the trainer computes them (absent elsewhere)."""
+
 UPDATE_SCHEMA: dict[str, Any] = {
     "title": "a2cm_phys.UpdateMetrics",
     "description": "One learner update: counters, then the trainer's metrics (null if not finite).",
@@ -176,6 +212,9 @@ UPDATE_SCHEMA: dict[str, Any] = {
         "env_steps": {"type": "integer", "description": "environment steps so far (all games)"},
         "episodes": {"type": "integer", "description": "episodes finished so far"},
         **{k: {"type": ["number", "null"]} for k in UPDATE_METRICS},
+        **{
+            k: {"type": ["number", "null"], "description": doc} for k, doc in SPARSE_METRICS.items()
+        },
     },
     "additionalProperties": {"type": ["number", "null", "string", "boolean"]},
     "required": ["update", "env_steps", "episodes"],

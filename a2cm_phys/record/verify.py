@@ -1,11 +1,13 @@
 """Re-simulate logged episodes and compare them with the log: ``replay --verify``.
 
-Each trajectory is replayed from its seed and the pursuers' logged actions with the
-scenario stored in the log, and compared step by step (positions, velocities, the evader's
-moves, rewards, captures, collisions, wall contacts, contact events, the episode's end);
-then the episode's summary is checked against the trajectory (env, seed, length, return,
-captured, truncated, ended by a collision, collisions, wall contacts), so that a changed
-summary is caught as well.
+Each trajectory is replayed from its seed and the logged actions with the scenario stored
+in the log: the pursuers' (moves, or continuous commands fed back exactly as they were
+given, so the env clips them again the same way), and a learned evader's (given as the
+step's ``evader_actions``). It is compared step by step (positions, velocities, the evader's
+actions, rewards, a learned evader's rewards, captures, collisions, wall contacts, contact
+events, the episode's end), bit for bit; then the episode's summary is checked against the
+trajectory (env, seed, length, return, a learned evader's return, captured, truncated,
+ended by a collision, collisions, wall contacts), so that a changed summary is caught too.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from ..config import Scenario
+from ..envs.core import evader_reward
 from ..envs.factory import make_core
 from .reader import RunLog, Trajectory
 
@@ -22,34 +25,45 @@ from .reader import RunLog, Trajectory
 def verify_trajectory(
     scenario: Scenario, traj: Trajectory, core: object | None = None
 ) -> str | None:
-    """Re-simulate ``traj`` from its seed and pursuer actions; ``None`` if it matches the
+    """Re-simulate ``traj`` from its seed and logged actions; ``None`` if it matches the
     log exactly, else a description of the first divergence."""
     core = core if core is not None else make_core(scenario, 1)
     n, length = scenario.pursuers, traj.length
+    if traj.continuous != scenario.continuous:
+        kind = "commands" if traj.continuous else "moves"
+        return f"the log holds {kind}, but scenario {scenario.name} has {scenario.control} control"
+    learned = scenario.evader == "learned"
     core.reset(np.array([0]), np.array([traj.seed], dtype=np.uint64))
     sim = {
         "positions": np.zeros_like(traj.positions),
-        "evader action": np.zeros(length, dtype=np.int64),
+        "evader action": np.zeros_like(traj.actions[:, n]),
         "reward": np.zeros(length),
         "captured": np.zeros(length, dtype=bool),
         "collisions": np.zeros(length, dtype=np.int64),
         "wall contacts": np.zeros(length, dtype=np.int64),
         "episode end": np.zeros(length, dtype=bool),
     }
+    check_evader_reward = learned and traj.evader_reward is not None  # format 1: not logged
+    if check_evader_reward:
+        sim["evader reward"] = np.zeros(length)
     physics = traj.velocities is not None
     if physics:
         sim["velocities"] = np.zeros_like(traj.velocities)
         sim["velocities"][0] = core.velocities()[0]
     sim["positions"][0] = core.positions()[0]
     sim_events: list[tuple] = []
-    actions = traj.actions[:, :n].astype(np.int64)
+    actions = np.ascontiguousarray(traj.actions[:, :n])
+    evader_actions = np.ascontiguousarray(traj.actions[:, n]) if learned else None
     for k in range(length):
-        out = core.step(actions[k : k + 1])
+        given = None if evader_actions is None else evader_actions[k : k + 1]
+        out = core.step(actions[k : k + 1], given)
         sim["positions"][k + 1] = core.positions()[0]
         if physics:
             sim["velocities"][k + 1] = core.velocities()[0]
         sim["evader action"][k] = out.evader_action[0]
         sim["reward"][k] = out.reward[0]
+        if check_evader_reward:
+            sim["evader reward"][k] = evader_reward(scenario, out)[0]
         sim["captured"][k] = out.captured[0]
         sim["collisions"][k] = out.collisions[0]
         sim["wall contacts"][k] = out.wall_contacts[0]
@@ -65,6 +79,7 @@ def verify_trajectory(
         "velocities": traj.velocities,
         "evader action": traj.actions[:, n],
         "reward": traj.reward,
+        "evader reward": traj.evader_reward,
         "captured": traj.captured,
         "collisions": traj.collisions,
         "wall contacts": traj.wall_contacts,
@@ -73,7 +88,7 @@ def verify_trajectory(
     first: tuple[int, str] | None = None
     for name, sim_values in sim.items():
         log_values = logged[name]
-        differs = (log_values != sim_values).reshape(len(log_values), -1).any(axis=1)
+        differs = _differs(log_values, sim_values, bitwise=name == "evader action")
         if differs.any():
             k = int(np.argmax(differs))
             state = name in ("positions", "velocities")  # row k is the state after k steps
@@ -93,6 +108,19 @@ def verify_trajectory(
             f"{logged_events[i : i + 2]}, re-simulated {sim_events[i : i + 2]}"
         )
     return None
+
+
+def _differs(logged: np.ndarray, sim: np.ndarray, bitwise: bool) -> np.ndarray:
+    """Per row, whether ``logged`` and ``sim`` differ: by ``!=``, or for float actions (which
+    the log holds bit-exact) bit for bit, so that ``-0.0`` is not ``0.0`` and NaN is NaN.
+    (States and rewards are compared by value: their text may write ``-0.0`` as ``0``.)"""
+    logged, sim = np.asarray(logged), np.asarray(sim)
+    rows = len(logged)
+    if bitwise and logged.dtype.kind == "f":
+        a = logged.astype(np.float64).reshape(rows, -1).view(np.int64)
+        b = np.asarray(sim, dtype=np.float64).reshape(rows, -1).view(np.int64)
+        return (a != b).any(axis=1)
+    return (logged != sim).reshape(rows, -1).any(axis=1)
 
 
 def _divergence(check: tuple[str, int, object, object]) -> str:
@@ -118,6 +146,11 @@ def summary_mismatch(log: RunLog, traj: Trajectory, scenario: Scenario) -> str |
         "seed": traj.seed,
         "length": traj.length,
         "return": float(traj.reward.sum()),
+        **(
+            {"evader_return": float(traj.evader_reward.sum())}
+            if traj.evader_reward is not None and "evader_return" in ep
+            else {}
+        ),
         "captured": captured,
         "truncated": traj.length >= scenario.max_steps and not terminated,
         "collision_terminated": terminated and not captured,
@@ -126,7 +159,8 @@ def summary_mismatch(log: RunLog, traj: Trajectory, scenario: Scenario) -> str |
     }
     for key, want in expected.items():
         got = ep[key][i].item()
-        same = np.isclose(got, want, rtol=1e-12, atol=0) if key == "return" else got == want
+        returns = key in ("return", "evader_return")
+        same = np.isclose(got, want, rtol=1e-12, atol=0) if returns else got == want
         if not same:
             return f"summary {key} is {got!r}, the trajectory gives {want!r}"
     return None
