@@ -102,7 +102,7 @@ class ContactTracker:
     module docstring).
     """
 
-    __slots__ = ("_active", "_began", "_start_active", "_touched_before")
+    __slots__ = ("_active", "_began", "_changed", "_start_active", "_steady", "_touched_before")
 
     def __init__(self) -> None:
         self.clear()
@@ -113,11 +113,16 @@ class ContactTracker:
         self._began: set[Pair] = set()  # pairs with a begin callback in this step
         self._start_active: set[Pair] = set()  # pairs touching when this step started
         self._touched_before: set[Pair] = set()  # pairs that touched at any time last step
+        self._changed = False  # a callback came in this step
+        # Whether a step without callbacks would leave everything as it is (it would set
+        # _touched_before to _start_active and keep the rest).
+        self._steady = True
 
     def begin(self, pair: Pair) -> None:
         """pymunk reported that ``pair`` started touching (through one more shape pair)."""
         self._active[pair] = self._active.get(pair, 0) + 1
         self._began.add(pair)
+        self._changed = True
 
     def separate(self, pair: Pair) -> None:
         """pymunk reported that ``pair`` stopped touching (through one shape pair)."""
@@ -126,18 +131,21 @@ class ContactTracker:
             self._active[pair] = left
         else:
             self._active.pop(pair, None)
+        self._changed = True
 
     def end_step(self, step: int) -> list[Event]:
         """Close step ``step``: the events of the contacts that are new in it, sorted."""
+        if not self._changed and self._steady:
+            return []  # the common case: no callback, and the same contacts as last step
         began = self._began
-        if not began and not self._start_active and not self._touched_before:
-            return []  # the common case: nothing touched in this step or the last
         new = sorted(began - self._touched_before, key=_event_order)
         # A pair touched at some moment of this step iff it touched when the step started
         # or began touching during it (a pair touching at the end did one or the other).
         self._touched_before = began | self._start_active
         self._start_active = set(self._active)
         self._began = set()
+        self._changed = False
+        self._steady = self._touched_before == self._start_active
         return [(*pair, step) for pair in new]
 
     def touching(self) -> set[Pair]:

@@ -18,8 +18,9 @@ substeps. A discrete action sets its servo to ``max_speed`` along its axis; a co
 command (clipped to the unit disc) sets it to that fraction of ``max_speed``. The evader
 is a policy given to the core (:class:`~.core.EvaderPolicy`; by default the scenario's
 scripted one) whose command drives its servo the same way. The only Python work per
-substep is one call of chipmunk's step function, and per step one call per (changed) servo
-and per body read (see :data:`DIRECT_CALLS`). Contact callbacks
+substep is one call of chipmunk's step function; per step, every servo of every game is
+steered by one numpy scatter and every body read by one gather, in chipmunk's memory (see
+:data:`DIRECT_CALLS`). Contact callbacks
 (:meth:`pymunk.Space.on_collision`) run only when shapes begin or stop touching and feed
 a :class:`~.contacts.ContactTracker`, which turns them into the step's events (debounced:
 see :mod:`.contacts`); the penalties are :func:`~.contacts.score_events`. Actions and the
@@ -77,17 +78,22 @@ COLLISION_SLOP = 0.01
 """Allowed overlap (m) before the solver pushes shapes apart; pymunk's default, 0.1, is sized
 for pixels and would let 0.6 m boxes sink 10 cm into each other."""
 
-Callback = Callable[[pymunk.Arbiter, pymunk.Space, Any], None]
-
 DIRECT_CALLS = True
-"""Make the frequent calls (stepping a space, steering a servo, reading and placing a body,
-finding a contact's two shapes) straight to chipmunk's C functions when this pymunk exposes
-them, instead of through pymunk's Python wrappers of the same calls. The wrappers add
-bookkeeping for objects added or removed from callbacks, which ours never do, and Python
-attribute machinery and allocations: at 10 substeps per env step they cost as much as the
-simulation itself. Trajectories are the same bit for bit (tested with this off). Creating
-pymunk objects and adding them to or removing them from spaces always goes through pymunk's
-API."""
+"""Make the frequent operations go straight to chipmunk when this pymunk allows it, instead
+of through pymunk's Python wrappers of the same calls:
+
+- stepping a space, placing a body at a reset: chipmunk's C functions;
+- steering the servos and reading the bodies: one numpy scatter and one gather per step
+  over every game, in chipmunk's memory (:class:`_Memory`; the offsets of ``cpBody``'s
+  position and velocity are checked once against chipmunk's getters and setters,
+  :func:`_body_layout`, else each body is read and steered by a C call);
+- contacts: C callbacks set in chipmunk's own handler (:func:`_handle_contacts`), which
+  find their two shapes with ``cpArbiterGetShapes``, without pymunk's dispatcher.
+
+The wrappers add bookkeeping for objects added or removed from callbacks, which ours never
+do, and Python attribute machinery and allocations: they cost as much as the simulation
+itself. Trajectories are the same bit for bit (tested with this off). Creating pymunk objects
+and adding them to or removing them from spaces always goes through pymunk's API."""
 
 
 def _pair_table(scenario: Scenario) -> list[list[Pair]]:
@@ -124,11 +130,13 @@ class World:
 
     __slots__ = (
         "_callbacks",
+        "_hooked",
         "_max_force",
         "_placing",
         "_shapes",
         "_static",
         "_walls",
+        "addresses",
         "bodies",
         "commands",
         "controls",
@@ -182,9 +190,11 @@ class World:
             (_access(body, "position", write=True), _access(body, "velocity", write=True))
             for body in self.bodies
         ]
+        self.addresses = _addresses(self.bodies, self.controls)
         self._max_force = ph.max_force
         self.tracker = ContactTracker()
         self._callbacks = _callbacks(self.tracker, table, tags)
+        self._hooked: Any = None  # the space's handler, when it calls C callbacks
         self.space: pymunk.Space | None = None
         self.servos: list[pymunk.PivotJoint] = []
         self.commands: list[int] = []  # the action each control body executes
@@ -193,7 +203,8 @@ class World:
     def rebuild(self, xy: np.ndarray) -> None:
         """A new space with every agent at rest at ``xy`` (``(N + 1, 2)`` metres)."""
         old = self.space
-        if old is not None:  # release the objects (its separate callbacks may still fire)
+        _unhook(self._hooked)  # the removals below need not reach the tracker: it is cleared
+        if old is not None:  # release the objects (pymunk's separate callbacks still fire)
             old.remove(*self._walls, *self._shapes, *self.servos, *self.bodies)
             old.remove(self._static)
         space = pymunk.Space()
@@ -223,13 +234,15 @@ class World:
             self.servos.append(servo)
         self.commands = [STAY] * len(self.bodies)
         self.tracker.clear()
-        begin, separate = self._callbacks
         # One wildcard handler: the pairs that can touch are exactly the ones we record
         # (pursuer-pursuer, pursuer-evader, agent-wall; static walls never touch each
         # other and there is one evader), and one handler costs a quarter of four.
-        space.on_collision(begin=begin, separate=separate)
+        self._hooked = _handle_contacts(space, self._callbacks)
         self.space = space
         self.step: Callable[[float], None] = _stepper(space)
+
+    def __del__(self) -> None:
+        _unhook(getattr(self, "_hooked", None))
 
 
 def _stepper(space: pymunk.Space) -> Callable[[float], None]:
@@ -252,35 +265,129 @@ def _access(body: pymunk.Body, attr: str, write: bool) -> Callable[..., Any]:
     return partial(setattr if write else getattr, body, attr)
 
 
+_POSITION_AT = 168
+"""Byte offset in chipmunk's ``cpBody`` of ``transform.tx`` (then ``ty``): the position
+``cpBodyGetPosition`` returns (the transform's origin; every body here has its centre of
+gravity at its centre and no rotation, so this is ``body->p`` too)."""
+_VELOCITY_AT = 80
+"""Byte offset in chipmunk's ``cpBody`` of ``v`` (then its ``y``), the velocity that
+``cpBodyGetVelocity`` returns and ``cpBodySetVelocity`` sets."""
+
+
+@cache
+def _body_layout() -> bool:
+    """Whether this chipmunk's ``cpBody`` keeps positions and velocities at
+    :data:`_POSITION_AT` and :data:`_VELOCITY_AT` (``chipmunk_private.h``'s layout, which
+    pymunk's cffi declarations leave opaque). Checked once on probe bodies, stepped in a
+    space, against chipmunk's getters and setters; a build where it fails keeps the
+    per-body calls."""
+    ffi = getattr(pymunk, "ffi", None)
+    if ffi is None:
+        return False
+    try:
+        body = pymunk.Body(1.0, float("inf"))
+        control = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        space = pymunk.Space()
+        servo = pymunk.PivotJoint(control, body, (0.0, 0.0), (0.0, 0.0))
+        servo.max_bias = 0.0
+        space.add(body, pymunk.Poly.create_box(body, (0.5, 0.5)), servo)
+        body.position, body.velocity = (1.25, -3.5), (0.375, 7.0)
+        addresses = _raw_addresses([body], [control])
+        memory = _Memory(addresses)
+        position, velocity, steer = memory.index(addresses)
+        memory.view[steer[0]] = (-0.625, 0.25)  # as the core steers
+        space.step(0.05)
+        got = [memory.view[index[0]].tolist() for index in (position, velocity, steer)]
+        return got == [list(body.position), list(body.velocity), list(control.velocity)]
+    except Exception:
+        return False
+
+
+def _addresses(bodies: Sequence[pymunk.Body], controls: Sequence[pymunk.Body]) -> np.ndarray | None:
+    """Byte addresses ``(3, N + 1, 2)`` of the bodies' positions and velocities and of the
+    control bodies' velocities in chipmunk's memory, for :class:`_Memory` (see
+    :data:`DIRECT_CALLS`); ``None`` where they cannot be used."""
+    if not DIRECT_CALLS or not _body_layout():
+        return None
+    return _raw_addresses(bodies, controls)
+
+
+def _raw_addresses(bodies: Sequence[pymunk.Body], controls: Sequence[pymunk.Body]) -> np.ndarray:
+    """:func:`_addresses`, unchecked."""
+    handles = [b._body for b in (*bodies, *controls)]
+    at = np.array([int(pymunk.ffi.cast("uintptr_t", h)) for h in handles], dtype=np.int64)
+    n = len(bodies)
+    xy = np.array([0, 8], dtype=np.int64)
+    return np.stack(
+        (
+            at[:n, None] + _POSITION_AT + xy,
+            at[:n, None] + _VELOCITY_AT + xy,
+            at[n:, None] + _VELOCITY_AT + xy,
+        )
+    )
+
+
+class _Memory:
+    """A float64 numpy view of this process's memory from the lowest to the highest of some
+    byte addresses, so that chipmunk's bodies are read and steered with one numpy gather and
+    one scatter per step (see :data:`DIRECT_CALLS`). Only the indexed words are ever touched;
+    whoever indexes it keeps the bodies alive."""
+
+    __slots__ = ("lo", "view")
+
+    def __init__(self, addresses: np.ndarray) -> None:
+        self.lo = int(addresses.min())
+        size = int(addresses.max()) + 8 - self.lo
+        ffi = pymunk.ffi
+        self.view = np.frombuffer(ffi.buffer(ffi.cast("char *", self.lo), size), np.float64)
+
+    def index(self, addresses: np.ndarray) -> np.ndarray:
+        """Indices into :attr:`view` of ``addresses`` (8-byte aligned, as doubles are)."""
+        return (addresses - self.lo) >> 3
+
+
 def _callbacks(
     tracker: ContactTracker, table: list[list[Pair]], tags: dict[pymunk.Shape, int]
-) -> tuple[Callback, Callback]:
-    """The begin/separate callbacks of one space: they only record into ``tracker``.
+) -> tuple[Any, Any, bool]:
+    """The begin/separate callbacks of one world's spaces, and whether they are chipmunk's
+    own (C function pointers for :func:`_handle_contacts`) rather than pymunk's. They only
+    record the pair of the arbiter's two shapes into ``tracker``.
 
-    Each looks up the pair of the arbiter's two shapes, through chipmunk's
-    ``cpArbiterGetShapes`` into buffers made once (see :data:`DIRECT_CALLS`), or through
-    :attr:`pymunk.Arbiter.shapes`, which allocates both buffers and two pymunk lookups
-    per call."""
-    get_shapes = getattr(pymunk.cp, "cpArbiterGetShapes", None)
+    Chipmunk's own (see :data:`DIRECT_CALLS`) are cffi callbacks, made once per world,
+    that find the shapes through ``cpArbiterGetShapes`` into buffers made once. pymunk's
+    (:meth:`pymunk.Space.on_collision`) go through pymunk's dispatcher, which builds an
+    :class:`pymunk.Arbiter` per call, and :attr:`pymunk.Arbiter.shapes`, which allocates
+    both buffers and makes two pymunk lookups."""
+    ffi, cp = getattr(pymunk, "ffi", None), pymunk.cp
+    get_shapes = getattr(cp, "cpArbiterGetShapes", None)
     if (
         DIRECT_CALLS
+        and ffi is not None
         and get_shapes is not None
-        and _arbiter_handle()
+        and hasattr(cp, "cpSpaceAddCollisionHandler")
         and all(hasattr(shape, "_shape") for shape in tags)
     ):
-        out_a, out_b = pymunk.ffi.new("cpShape *[1]"), pymunk.ffi.new("cpShape *[1]")
+        out_a, out_b = ffi.new("cpShape *[1]"), ffi.new("cpShape *[1]")
         rows = {shape._shape: table[tag] for shape, tag in tags.items()}  # C pointers hash
         cols = {shape._shape: tag for shape, tag in tags.items()}
+        began, separated = tracker.begin, tracker.separate
 
-        def begin(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-            get_shapes(arbiter._arbiter, out_a, out_b)
-            tracker.begin(rows[out_a[0]][cols[out_b[0]]])
+        def begin(arbiter: Any, space: Any, data: Any) -> None:
+            get_shapes(arbiter, out_a, out_b)
+            began(rows[out_a[0]][cols[out_b[0]]])
 
-        def separate(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-            get_shapes(arbiter._arbiter, out_a, out_b)
-            tracker.separate(rows[out_a[0]][cols[out_b[0]]])
+        def separate(arbiter: Any, space: Any, data: Any) -> None:
+            get_shapes(arbiter, out_a, out_b)
+            separated(rows[out_a[0]][cols[out_b[0]]])
 
-        return begin, separate
+        try:
+            return (
+                ffi.callback("cpCollisionBeginFunc", begin),
+                ffi.callback("cpCollisionSeparateFunc", separate),
+                True,
+            )
+        except Exception:  # no C callbacks on this system (e.g. no executable memory)
+            pass
 
     def begin_(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         a, b = arbiter.shapes
@@ -290,16 +397,37 @@ def _callbacks(
         a, b = arbiter.shapes
         tracker.separate(table[tags[a]][tags[b]])
 
-    return begin_, separate_
+    return begin_, separate_, False
 
 
-@cache
-def _arbiter_handle() -> bool:
-    """Whether this pymunk's :class:`pymunk.Arbiter` keeps chipmunk's handle as ``_arbiter``
-    (asked of a dummy arbiter: a callback failing on it would not raise, since cffi only
-    prints the exceptions raised in callbacks)."""
-    ffi = getattr(pymunk, "ffi", None)
-    return ffi is not None and hasattr(pymunk.Arbiter(ffi.NULL, None), "_arbiter")
+_WILDCARD = (1 << 64) - 1
+"""chipmunk's wildcard collision type (``~(cpCollisionType)0``), as pymunk passes it."""
+
+
+def _handle_contacts(space: pymunk.Space, callbacks: tuple[Any, Any, bool]) -> Any:
+    """Give ``space`` one wildcard contact handler with the ``begin`` and ``separate``
+    callbacks of :func:`_callbacks`: set straight into chipmunk's handler when they are C
+    callbacks (what pymunk's ``on_collision`` does, without its per-call dispatcher; the
+    handler is returned, with chipmunk's default callbacks, for :func:`_unhook`), else
+    through :meth:`pymunk.Space.on_collision` (``None`` is returned). Pre- and post-solve
+    keep chipmunk's defaults either way."""
+    begin, separate, raw = callbacks
+    if not raw:
+        space.on_collision(begin=begin, separate=separate)
+        return None
+    handler = pymunk.cp.cpSpaceAddCollisionHandler(space._space, _WILDCARD, _WILDCARD)
+    defaults = handler.beginFunc, handler.separateFunc
+    handler.beginFunc, handler.separateFunc = begin, separate
+    return handler, defaults
+
+
+def _unhook(hooked: Any) -> None:
+    """Give a handler of :func:`_handle_contacts` back chipmunk's default callbacks, so that
+    its space never calls C callbacks that may be freed before it (pymunk removes the
+    shapes of a space it frees, which calls ``separate``)."""
+    if hooked is not None:
+        handler, (begin, separate) = hooked
+        handler.beginFunc, handler.separateFunc = begin, separate
 
 
 def start_positions(scenario: Scenario) -> np.ndarray:
@@ -387,12 +515,28 @@ class PhysicsCore(StateViews):
         self._give = getattr(self._evader, "give", None)  # a learned evader's mailbox
         self._continuous = scenario.continuous
         self._dt = ph.dt / ph.substeps
-        self._velocity = [tuple(v) for v in (ACTION_DELTAS * ph.max_speed).astype(float).tolist()]
+        self._velocities = (ACTION_DELTAS * ph.max_speed).astype(np.float64)  # (moves, 2)
+        self._velocity = [tuple(v) for v in self._velocities.tolist()]
         self._worlds = [World(scenario, self._start, self._table) for _ in range(num_envs)]
         self._spares: list[World] = []  # worlds rebuilt at the default start in advance
         self._retired: list[World] = []  # worlds replaced by spares, to be rebuilt as spares
         self._state = np.zeros((num_envs, 2, n + 1, 2))  # [game, position|velocity, agent, xy]
         self._state[:, 0] = self._start
+        # Direct access to the bodies' memory (DIRECT_CALLS): each game's addresses, and
+        # the view and indices that :meth:`_map` makes of them.
+        self._addresses: np.ndarray | None = None
+        if all(world.addresses is not None for world in self._worlds):
+            self._addresses = np.stack([world.addresses for world in self._worlds])
+            self._map()
+
+    def _map(self) -> None:
+        """(Re)make the memory view over every game's bodies and its read/write indices."""
+        assert self._addresses is not None
+        memory = _Memory(self._addresses)
+        index = memory.index(self._addresses)
+        self._memory = memory.view
+        self._read = index[:, :2]  # (B, position|velocity, agent, xy): the state's layout
+        self._write = index[:, 2]  # (B, agent, xy): the control bodies' velocities
 
     # ------------------------------------------------------------------ reset
 
@@ -411,13 +555,19 @@ class PhysicsCore(StateViews):
         for k, where in enumerate(placed[: len(envs)]):
             if where:  # validate everything before touching any game
                 starts[k] = placed_positions(self.scenario, where)
+        swapped = False
         for env, xy in zip(envs.tolist(), starts, strict=True):
             if xy is self._start and self._spares:
                 self._retired.append(self._worlds[env])
-                self._worlds[env] = self._spares.pop()
+                world = self._worlds[env] = self._spares.pop()
+                if self._addresses is not None:
+                    self._addresses[env] = world.addresses
+                    swapped = True
             else:
                 self._worlds[env].rebuild(xy)
             self._state[env, 0], self._state[env, 1] = xy, 0.0
+        if swapped:
+            self._map()
         self.t[envs] = 0
         self.episode_seed[envs] = seeds
         self._evader.restart(envs, self.episode_seed[envs])
@@ -437,6 +587,11 @@ class PhysicsCore(StateViews):
         self._spares.append(world)
         return len(self._spares)
 
+    @property
+    def spare_worlds(self) -> int:
+        """How many worlds :meth:`build_spare` has prepared that no reset has taken yet."""
+        return len(self._spares)
+
     # ------------------------------------------------------------------ step
 
     def step(self, actions: np.ndarray, evader_actions: np.ndarray | None = None) -> StepOutcome:
@@ -453,6 +608,9 @@ class PhysicsCore(StateViews):
         pos = self._state[:, 0]
         evader = self._evader.moves(self.episode_seed, self.t, pos[:, n], pos[:, :n])
         self.t += 1
+        if self._addresses is not None:
+            moves = np.concatenate((actions, evader[:, None]), axis=1)
+            return self._advance(self._velocities[moves], evader)
         velocity, dt, substeps = self._velocity, self._dt, range(sc.physics.substeps)
         state = []
         events = []
@@ -484,7 +642,10 @@ class PhysicsCore(StateViews):
         evader = self._evader.moves(self.episode_seed, self.t, pos[:, n], pos[:, :n])
         self.t += 1
         commands = np.concatenate((actions, evader[:, None]), axis=1)
-        velocities = (clip_to_disc(commands) * self.scenario.physics.max_speed).tolist()
+        velocities = clip_to_disc(commands) * self.scenario.physics.max_speed
+        if self._addresses is not None:
+            return self._advance(velocities, evader)
+        velocities = velocities.tolist()
         dt, substeps = self._dt, range(self.scenario.physics.substeps)
         state = []
         events = []
@@ -499,6 +660,23 @@ class PhysicsCore(StateViews):
                 v = probe()
                 state += v.x, v.y
         self._state[:] = np.array(state).reshape(self._state.shape)
+        return self._score(events, evader)
+
+    def _advance(self, velocities: np.ndarray, evader: np.ndarray) -> StepOutcome:
+        """Step every game with the servo ``velocities`` ``(B, N + 1, 2)`` through the bodies'
+        memory: one scatter steers every control body, one gather reads every body. The
+        same numbers as the per-body calls: setting a kinematic body's velocity is only
+        the store (chipmunk wakes dynamic bodies alone), and games are independent, so
+        steering all before stepping any changes nothing."""
+        self._memory[self._write] = velocities
+        dt, substeps = self._dt, range(self.scenario.physics.substeps)
+        events = []
+        for world, step in zip(self._worlds, self.t.tolist(), strict=True):
+            space_step = world.step
+            for _ in substeps:
+                space_step(dt)
+            events.append(world.tracker.end_step(step))
+        self._state[:] = self._memory[self._read]
         return self._score(events, evader)
 
     def _score(self, events: list[list], evader: np.ndarray) -> StepOutcome:

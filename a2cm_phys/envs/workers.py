@@ -178,9 +178,9 @@ def _serve(
         _report(conn, err)
         return
     while True:
-        built = 0
-        while built < spares and not conn.poll(0):  # idle: prepare worlds for resets
-            built = core.build_spare()
+        # Idle: prepare worlds for resets, up to ``spares`` waiting (not one more per step).
+        while core.spare_worlds < spares and not conn.poll(0):
+            core.build_spare()
         try:
             command, placed = conn.recv()
         except EOFError:  # the parent went away
