@@ -3,9 +3,10 @@
     python benchmarks/bench_collision.py --variants paper16,ours --seeds 0-4 \
         --scenarios grid_collision,grid_collision_continue [--algos a2cm,a2c] [--jobs 2]
 
-Each variant is a set of training options (``VARIANTS``; every run has 640,000 steps unless
-``--steps`` says otherwise). A run is trained, then its greedy and sampled policies play
-``--episodes`` evaluation episodes; a row gives medians over seeds of the mean capture steps
+Each variant is the paper's method (``--preset paper``) with the options of ``VARIANTS``;
+``ours`` is the defaults. Every run has 640,000 steps unless ``--steps`` says otherwise. A
+run is trained, then its greedy and sampled policies play ``--episodes`` evaluation
+episodes; a row gives medians over seeds of the mean capture steps
 (greedy, sampled), the collisions per episode, the return relative to the optimum's (raw
 reward) and the wall time, beside the exact optimum (``a2cm_phys.oracle``). Runs go to a
 process pool (``--jobs``), so wall times are only comparable within one invocation.
@@ -185,12 +186,14 @@ def run(scenario: str, algo: str, variant: str, seed: int, steps: int, episodes:
     """Train one run and evaluate it; returns a row of figures."""
     import torch
 
-    from a2cm_phys.config import load_scenario, load_train
+    from a2cm_phys.config import load_scenario, load_train, preset
     from a2cm_phys.evaluate import model_policy, play
     from a2cm_phys.train import Trainer
 
     torch.set_num_threads(1)
-    options = dict(VARIANTS[variant])
+    # every variant is the paper's method (--preset paper) plus its options; "ours" is the
+    # defaults
+    options = {} if variant == "ours" else {**preset("paper"), **VARIANTS[variant]}
     batch = options.get("batch_size", load_train(options).batch_size)
     cfg = load_train({**options, "algo": algo, "seed": seed, "updates": steps // batch})
     sc = load_scenario(scenario)
