@@ -140,6 +140,7 @@ class World:
         "bodies",
         "commands",
         "controls",
+        "cp_space",
         "probes",
         "servos",
         "space",
@@ -239,6 +240,7 @@ class World:
         # other and there is one evader), and one handler costs a quarter of four.
         self._hooked = _handle_contacts(space, self._callbacks)
         self.space = space
+        self.cp_space = getattr(space, "_space", None)  # chipmunk's handle
         self.step: Callable[[float], None] = _stepper(space)
 
     def __del__(self) -> None:
@@ -525,7 +527,10 @@ class PhysicsCore(StateViews):
         # Direct access to the bodies' memory (DIRECT_CALLS): each game's addresses, and
         # the view and indices that :meth:`_map` makes of them.
         self._addresses: np.ndarray | None = None
-        if all(world.addresses is not None for world in self._worlds):
+        self._cp_step = getattr(pymunk.cp, "cpSpaceStep", None)
+        if self._cp_step is not None and all(
+            world.addresses is not None and world.cp_space is not None for world in self._worlds
+        ):
             self._addresses = np.stack([world.addresses for world in self._worlds])
             self._map()
 
@@ -669,12 +674,12 @@ class PhysicsCore(StateViews):
         the store (chipmunk wakes dynamic bodies alone), and games are independent, so
         steering all before stepping any changes nothing."""
         self._memory[self._write] = velocities
-        dt, substeps = self._dt, range(self.scenario.physics.substeps)
+        dt, substeps, space_step = self._dt, range(self.scenario.physics.substeps), self._cp_step
         events = []
         for world, step in zip(self._worlds, self.t.tolist(), strict=True):
-            space_step = world.step
+            space = world.cp_space
             for _ in substeps:
-                space_step(dt)
+                space_step(space, dt)
             events.append(world.tracker.end_step(step))
         self._state[:] = self._memory[self._read]
         return self._score(events, evader)

@@ -33,6 +33,7 @@ import traceback
 from collections.abc import Mapping, Sequence
 from dataclasses import fields
 from multiprocessing.connection import Connection
+from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
 import numpy as np
@@ -50,6 +51,9 @@ _OUTCOME = tuple(f.name for f in fields(StepOutcome) if f.name != "events")
 the contact events)."""
 
 Placement = Mapping[str, Sequence[float]] | None
+
+_STEP = ForkingPickler.dumps(("step", {}))
+"""A step request without placements, as :meth:`Connection.send` would pickle it."""
 
 
 class WorkerError(RuntimeError):
@@ -330,7 +334,10 @@ class ProcessCore(StateViews):
         self._views["actions"][:] = actions  # before asking any worker
         for w in range(len(self._conns)):
             try:
-                self._conns[w].send(("step", self._placed[w]))
+                if self._placed[w]:
+                    self._conns[w].send(("step", self._placed[w]))
+                else:  # the common request, pickled once
+                    self._conns[w].send_bytes(_STEP)
             except (BrokenPipeError, ConnectionResetError, OSError):
                 raise self._death(w) from None
             if self._placed[w]:
