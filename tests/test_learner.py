@@ -16,10 +16,16 @@ from torch.distributions import Categorical
 from a2cm_phys.algos.distributions import GaussianActions
 from a2cm_phys.algos.learner import Learner, NonFiniteLoss
 from a2cm_phys.algos.models import ActorCritic, StackedLinear
-from a2cm_phys.config import Train, load_train
+from a2cm_phys.config import Train, load_train, preset
 from a2cm_phys.rollout import allocate_batch
 
 torch.set_num_threads(1)
+
+
+def paper_cfg(**options: object) -> Train:
+    """The paper's method (``--preset paper``) with ``options``: the plain loss these tests
+    check piece by piece (the defaults add our pieces on top)."""
+    return Train(**{**preset("paper"), **options})
 
 N, OBS, A = 3, 8, 4
 
@@ -62,7 +68,7 @@ def params(m: torch.nn.Module) -> list[torch.Tensor]:
 @pytest.mark.parametrize("algo", ["a2c", "a2cm"])
 def test_update_metrics_and_gradients_reach_every_head(algo: str) -> None:
     m = model(algo)
-    learner = Learner(m, Train(algo=algo))
+    learner = Learner(m, paper_cfg(algo=algo))
     before = params(m)
     metrics = learner.update(random_batch())
     assert set(metrics) == {
@@ -84,51 +90,55 @@ def test_update_metrics_and_gradients_reach_every_head(algo: str) -> None:
 
 def test_grad_norm_and_clipping() -> None:
     m = model("a2cm")
-    metrics = Learner(m, Train()).update(random_batch())
+    metrics = Learner(m, paper_cfg()).update(random_batch())
     manual = torch.linalg.vector_norm(torch.stack([p.grad.norm() for p in m.parameters()]))
     assert metrics["grad_norm"] == pytest.approx(manual.item(), rel=1e-5)
     m2 = model("a2cm")
-    clipped = Learner(m2, Train(max_grad_norm=1e-3)).update(random_batch())
+    clipped = Learner(m2, paper_cfg(max_grad_norm=1e-3)).update(random_batch())
     assert clipped["grad_norm"] == pytest.approx(metrics["grad_norm"], rel=1e-5)  # pre-clip
     after = torch.linalg.vector_norm(torch.stack([p.grad.norm() for p in m2.parameters()]))
     assert after.item() == pytest.approx(1e-3, rel=1e-3)
 
 
-def actor0_grad(m: ActorCritic, batch: dict) -> list[torch.Tensor]:
+def actor0_grad(m: ActorCritic, batch: dict, **options: object) -> list[torch.Tensor]:
     """Gradient of agent 0's actor after one update on ``batch``."""
-    Learner(m, Train(algo="a2c" if m.n_critics > 1 else "a2cm")).update(batch)
+    Learner(m, paper_cfg(algo="a2c" if m.n_critics > 1 else "a2cm", **options)).update(batch)
     return [m.actor_hidden.weight.grad[0].clone(), m.actor_out.weight.grad[0].clone()]
 
 
-def test_a2c_actor_i_uses_only_critic_i() -> None:
+# advantage and value normalisation are per critic: they must not couple A2C's pairs
+OURS = {"normalize_advantages": True, "value_norm": True, "lr_schedule": "linear"}
+
+
+@pytest.mark.parametrize("options", [{}, OURS], ids=["paper", "ours"])
+def test_a2c_actor_i_uses_only_critic_i(options: dict) -> None:
     batch = random_batch()
-    base = actor0_grad(model("a2c"), batch)
+    base = actor0_grad(model("a2c"), batch, **options)
     other_critic = model("a2c")
     with torch.no_grad():
         other_critic.critic_out.bias[1] += 5.0  # change agent 1's critic only
-    assert all(
-        torch.equal(x, y) for x, y in zip(base, actor0_grad(other_critic, batch), strict=True)
-    )
+    other = actor0_grad(other_critic, batch, **options)
+    assert all(torch.equal(x, y) for x, y in zip(base, other, strict=True))
     own_critic = model("a2c")
     with torch.no_grad():
         own_critic.critic_out.bias[0] += 5.0  # change agent 0's critic
-    assert not torch.equal(base[1], actor0_grad(own_critic, batch)[1])
+    assert not torch.equal(base[1], actor0_grad(own_critic, batch, **options)[1])
 
 
 def test_truncation_bootstraps_from_final_obs() -> None:
     batch = random_batch()
-    base = Learner(model("a2cm"), Train()).update(batch)
+    base = Learner(model("a2cm"), paper_cfg()).update(batch)
     moved = dict(batch, final_obs=batch["final_obs"].clone())
     moved["final_obs"][5] += 1.0  # step 5 did not end: never read
-    assert Learner(model("a2cm"), Train()).update(moved) == base
+    assert Learner(model("a2cm"), paper_cfg()).update(moved) == base
     moved["final_obs"][7, 1] += 1.0  # step 7 of env 1 was truncated: its value is read
-    assert Learner(model("a2cm"), Train()).update(moved)["value_loss"] != base["value_loss"]
+    assert Learner(model("a2cm"), paper_cfg()).update(moved)["value_loss"] != base["value_loss"]
 
 
 def test_reward_scale() -> None:
     batch = random_batch()
-    scaled = Learner(model("a2c"), Train(algo="a2c", reward_scale=0.1)).update(batch)
-    pre = Learner(model("a2c"), Train(algo="a2c")).update(
+    scaled = Learner(model("a2c"), paper_cfg(algo="a2c", reward_scale=0.1)).update(batch)
+    pre = Learner(model("a2c"), paper_cfg(algo="a2c")).update(
         dict(batch, rewards=batch["rewards"] * 0.1)
     )
     assert scaled == pytest.approx(pre, rel=1e-5)
@@ -136,7 +146,7 @@ def test_reward_scale() -> None:
 
 def test_non_finite_loss_does_not_step() -> None:
     m = model("a2cm")
-    learner = Learner(m, Train())
+    learner = Learner(m, paper_cfg())
     learner.update(random_batch(seed=1))  # optimiser state exists
     before, opt_before = params(m), learner.optimizer.state_dict()
     sq = [s["square_avg"].clone() for s in learner.optimizer.state.values()]
@@ -153,7 +163,7 @@ def test_non_finite_loss_does_not_step() -> None:
 
 
 def test_state_dict_resume_is_bit_exact() -> None:
-    cfg = Train(algo="a2c")
+    cfg = paper_cfg(algo="a2c")
     a = Learner(model("a2c", seed=0), cfg)
     for s in range(3):
         a.update(random_batch(seed=s))
@@ -176,7 +186,7 @@ def test_one_step_bandit_learns_the_rewarded_actions(algo: str) -> None:
     # own target action; after a few hundred updates each target is taken with p > 0.9
     target = np.array([2, 0, 3])
     m = model(algo, hidden=16)
-    learner = Learner(m, Train(algo=algo, lr=7e-3, gamma=0.99))
+    learner = Learner(m, paper_cfg(algo=algo, lr=7e-3, gamma=0.99))
     rng = np.random.default_rng(0)
     obs = np.full((8, 1, OBS), 0.5, dtype=np.float32)
     done = torch.ones(8, 1, dtype=torch.bool)
@@ -199,11 +209,11 @@ def test_one_step_bandit_learns_the_rewarded_actions(algo: str) -> None:
 
 
 def test_train_defaults_are_keras_rmsprop() -> None:
-    learner = Learner(model("a2cm"), Train())
+    learner = Learner(model("a2cm"), paper_cfg())
     group = learner.optimizer.param_groups[0]
     assert (group["lr"], group["alpha"], group["eps"]) == (7e-3, 0.9, 1e-7)
     assert group["momentum"] == 0 and not group["centered"]
-    assert dataclasses.asdict(Train())["gamma"] == 0.99
+    assert dataclasses.asdict(paper_cfg())["gamma"] == 0.99
 
 
 # --------------------------------------------------------------------- against a reference
@@ -287,7 +297,7 @@ def reference_loss(
 
 @pytest.mark.parametrize("algo", ["a2c", "a2cm"])
 def test_loss_and_gradients_match_a_float64_reference(algo: str) -> None:
-    cfg = Train(algo=algo, reward_scale=0.5, entropy_coef=0.05)
+    cfg = paper_cfg(algo=algo, reward_scale=0.5, entropy_coef=0.05)
     for seed in range(3):
         m = model(algo, seed=seed, hidden=128)
         batch = trainer_batch(seed=seed)
@@ -317,14 +327,14 @@ def test_gaussian_loss_uses_the_unclipped_sample_and_reaches_log_std() -> None:
     batch = random_batch()
     rng = np.random.default_rng(0)
     batch["actions"] = torch.from_numpy(3.0 * rng.standard_normal((16, 2, N, 2))).float()
-    metrics = Learner(m, Train()).update(batch)
+    metrics = Learner(m, paper_cfg()).update(batch)
     assert m.log_std.grad is not None and m.log_std.grad.abs().sum() > 0
     # entropy of N(·, 1) per dimension at the initial log_std = 0
     assert metrics["entropy"] == pytest.approx(2 * 0.5 * np.log(2 * np.pi * np.e), rel=1e-6)
     # the log-probability is of the action as sampled (|a| = 3 is outside the box)
     m2 = gaussian_model("a2cm")
     clipped = dict(batch, actions=batch["actions"].clamp(-1, 1))
-    assert Learner(m2, Train()).update(clipped)["policy_loss"] != metrics["policy_loss"]
+    assert Learner(m2, paper_cfg()).update(clipped)["policy_loss"] != metrics["policy_loss"]
 
 
 @pytest.mark.parametrize("algo", ["a2c", "a2cm"])
@@ -332,7 +342,7 @@ def test_gaussian_bandit_learns_the_rewarded_command(algo: str) -> None:
     # one-step episodes, reward −|a_i − target_i|² summed: the means move to the targets
     target = np.array([[0.5, -0.5], [-0.3, 0.2], [0.0, 0.8]], dtype=np.float32)
     m = gaussian_model(algo)
-    learner = Learner(m, Train(algo=algo, lr=3e-3, optimizer="adam", normalize_advantages=True))
+    learner = Learner(m, paper_cfg(algo=algo, lr=3e-3, optimizer="adam", normalize_advantages=True))
     rng = np.random.default_rng(0)
     obs = np.full((32, 1, OBS), 0.5, dtype=np.float32)
     done = np.ones((32, 1), dtype=bool)
@@ -358,7 +368,8 @@ def test_gaussian_bandit_learns_the_rewarded_command(algo: str) -> None:
 # --------------------------------------------------------------------- issue 12's pieces
 def test_advantage_normalisation_standardises_the_actor_advantage() -> None:
     batch = trainer_batch(seed=4)
-    plain, normed = Train(entropy_coef=0.0), Train(entropy_coef=0.0, normalize_advantages=True)
+    plain = paper_cfg(entropy_coef=0.0)
+    normed = paper_cfg(entropy_coef=0.0, normalize_advantages=True)
     ref_metrics, _ = reference_loss(model("a2cm"), batch, plain)
     m = model("a2cm")
     metrics = Learner(m, normed).update(batch)
@@ -373,7 +384,7 @@ def test_advantage_normalisation_standardises_the_actor_advantage() -> None:
 
 
 def test_split_rewards_value_each_component_and_scale_it_apart() -> None:
-    cfg = Train(value_norm=True, split_rewards=True)
+    cfg = paper_cfg(value_norm=True, split_rewards=True)
     m = ActorCritic(OBS, N, A, 16, shared_critic=True, n_values=2)
     learner = Learner(m, cfg)
     batch = trainer_batch(seed=1)
@@ -384,7 +395,7 @@ def test_split_rewards_value_each_component_and_scale_it_apart() -> None:
     batch["rewards"] = parts.sum(-1)
     metrics = learner.update(batch)
     assert np.isfinite(metrics["loss"])
-    _, std = learner.value_norm.stats()
+    std = learner.value_norm.stats()[1][0]  # the one critic: (K,)
     assert std[1] > 1e5 * std[0]  # each component has its own scale
     adv = torch.ones(2, 2, 1, 2, dtype=torch.float64)
     expected = (1 / std[0] + 1 / std[1]).item()
@@ -394,7 +405,7 @@ def test_split_rewards_value_each_component_and_scale_it_apart() -> None:
 
 
 def test_collision_constraint_multiplier_follows_dual_ascent() -> None:
-    cfg = Train(
+    cfg = paper_cfg(
         value_norm=True,
         split_rewards=True,
         constrain_collisions=True,
@@ -417,7 +428,7 @@ def test_collision_constraint_multiplier_follows_dual_ascent() -> None:
     assert learner.multiplier == 0.0
     # with λ = 0 the actors see only the time component; λ weighs the collision cost in
     learner.multiplier = 3.0
-    _, std = learner.value_norm.stats()
+    std = learner.value_norm.stats()[1][0]  # the one critic: (K,)
     adv = torch.tensor([1.0, 2.0], dtype=torch.float64).expand(2, 2, 1, 2)
     expected = (1.0 / std[0] + 3.0 * 2.0 / std[1]) / 4.0
     assert learner._actor_advantage(adv)[0, 0, 0].item() == pytest.approx(expected.item())
@@ -429,4 +440,4 @@ def test_collision_constraint_multiplier_follows_dual_ascent() -> None:
 
 def test_constraint_needs_split_components() -> None:
     with pytest.raises(ValueError, match="split_rewards"):
-        load_train({"constrain_collisions": True})
+        load_train({"constrain_collisions": True, "split_rewards": False})

@@ -89,7 +89,7 @@ class Learner:
         self.optimizer = make_optimizer(model, train_cfg)
         self.device = next(model.parameters()).device
         self.value_norm = (
-            ValueNorm(model.n_values, beta=train_cfg.value_norm_beta)
+            ValueNorm((model.n_critics, model.n_values), beta=train_cfg.value_norm_beta)
             if train_cfg.value_norm
             else None
         )
@@ -237,15 +237,18 @@ class Learner:
         if self.cfg.split_rewards and self.cfg.balance_rewards and self.value_norm is not None:
             _, std = self.value_norm.stats()
             weight = torch.ones_like(std)
-            weight[1:] = self.cfg.collision_weight  # the collision component (REWARD_PARTS)
+            weight[..., 1:] = self.cfg.collision_weight  # the collision component
             adv = adv * (weight / std).to(adv.dtype)
         if self.cfg.constrain_collisions:  # time + λ·(minus collisions), both normalised
             lam = self.multiplier
             combined = (adv[..., 0] + lam * adv[..., 1]) / (1.0 + lam)
         else:
             combined = adv.sum(-1)
-        if self.cfg.normalize_advantages and combined.numel() > 1:
-            combined = (combined - combined.mean()) / (combined.std() + 1e-8)
+        if self.cfg.normalize_advantages and len(combined) * combined.shape[1] > 1:
+            # per critic: A2C's actor i sees only its own critic's advantages
+            mean = combined.mean(dim=(0, 1), keepdim=True)
+            std = combined.std(dim=(0, 1), keepdim=True)
+            combined = (combined - mean) / (std + 1e-8)
         return combined.float()
 
     # ------------------------------------------------------------------ checkpoints

@@ -18,19 +18,24 @@ import torch
 
 
 class ValueNorm:
-    """Debiased EMA of the mean and second moment of value targets, ``n`` components.
+    """Debiased EMA of the mean and second moment of value targets, per output.
 
     Args:
-        n: number of components (the trailing dim of targets).
+        shape: the trailing dims of targets that get statistics of their own, e.g.
+            ``(C, K)``: every critic and reward component apart (A2C's critics stay
+            independent), or ``n`` for ``(n,)``.
         beta: weight of the past per update (``0.999``: a memory of about 1,000 updates).
         min_var: floor of the variance (in squared reward units), so that a component
             that has been constant (e.g. no collision for a while) is not divided by zero.
     """
 
-    def __init__(self, n: int, beta: float = 0.999, min_var: float = 1e-4) -> None:
+    def __init__(
+        self, shape: int | tuple[int, ...], beta: float = 0.999, min_var: float = 1e-4
+    ) -> None:
         self.beta, self.min_var = beta, min_var
-        self.mean = torch.zeros(n, dtype=torch.float64)
-        self.mean_sq = torch.zeros(n, dtype=torch.float64)
+        self.shape = (shape,) if isinstance(shape, int) else tuple(shape)
+        self.mean = torch.zeros(self.shape, dtype=torch.float64)
+        self.mean_sq = torch.zeros(self.shape, dtype=torch.float64)
         self.debias = torch.zeros((), dtype=torch.float64)
 
     def stats(self) -> tuple[torch.Tensor, torch.Tensor]:
@@ -42,14 +47,14 @@ class ValueNorm:
         return mean, var.sqrt()
 
     def update(self, targets: torch.Tensor, layer: Any = None) -> None:
-        """Fold a batch of targets ``(..., n)`` into the statistics; rescale ``layer``.
+        """Fold a batch of targets ``(..., *shape)`` into the statistics; rescale ``layer``.
 
-        ``layer`` is the critic's output layer (``weight (C, n, H)``, ``bias (C, n)``): its
+        ``layer`` is the critic's output layer (``weight (C, K, H)``, ``bias (C, K)``): its
         outputs ``o`` are changed to ``(σ·o + μ − μ') / σ'`` so that ``σ'·o' + μ'`` equals the
         value before the update.
         """
         old_mean, old_std = self.stats()
-        flat = targets.detach().reshape(-1, targets.shape[-1]).double()
+        flat = targets.detach().reshape(-1, *self.shape).double()
         b = self.beta
         self.mean.mul_(b).add_(flat.mean(0), alpha=1 - b)
         self.mean_sq.mul_(b).add_((flat**2).mean(0), alpha=1 - b)
@@ -60,16 +65,16 @@ class ValueNorm:
         with torch.no_grad():
             w, bias = layer.weight, layer.bias
             ratio = (old_std / new_std).to(w.dtype)
-            w.mul_(ratio[:, None])
+            w.mul_(ratio[..., None])
             bias.mul_(ratio).add_(((old_mean - new_mean) / new_std).to(bias.dtype))
 
     def normalize(self, x: torch.Tensor) -> torch.Tensor:
-        """``(x − μ) / σ`` over the trailing component dim."""
+        """``(x − μ) / σ`` over the trailing dims ``shape``."""
         mean, std = self.stats()
         return (x - mean.to(x.dtype)) / std.to(x.dtype)
 
     def denormalize(self, x: torch.Tensor) -> torch.Tensor:
-        """``σ · x + μ`` over the trailing component dim."""
+        """``σ · x + μ`` over the trailing dims ``shape``."""
         mean, std = self.stats()
         return x * std.to(x.dtype) + mean.to(x.dtype)
 
