@@ -18,6 +18,7 @@ from a2cm_phys.train import main
 from a2cm_phys.trainer import Trainer, policy_rng
 
 VS = ("--scenario", "grid_vs", "--num-envs", "4", "--batch-size", "32", "--seed", "5")
+CONSTANT_LR = ("--set", "train.lr_schedule=constant")  # an extended run: the same schedule
 
 
 def test_both_teams_collect_their_own_actions_and_rewards() -> None:
@@ -65,8 +66,8 @@ def test_one_run_trains_both_teams(tmp_path: Path) -> None:
 
 def test_self_play_resumes_bit_for_bit(tmp_path: Path) -> None:
     full_dir, part_dir = tmp_path / "a", tmp_path / "b"
-    assert main([*VS, "--updates", "12", "--logdir", str(full_dir), "--no-progress"]) == 0
-    assert main([*VS, "--updates", "6", "--logdir", str(part_dir), "--no-progress"]) == 0
+    assert main([*VS, *CONSTANT_LR, "--updates", "12", "--logdir", str(full_dir)]) == 0
+    assert main([*VS, *CONSTANT_LR, "--updates", "6", "--logdir", str(part_dir)]) == 0
     (full,) = full_dir.iterdir()
     (part,) = part_dir.iterdir()
     assert main(["--resume", str(part), "--updates", "12", "--no-progress"]) == 0

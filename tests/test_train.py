@@ -18,7 +18,7 @@ import torch
 from a2cm_phys import checkpoint
 from a2cm_phys.algos import NonFiniteLoss
 from a2cm_phys.algos.learner import Learner
-from a2cm_phys.config import load_scenario, load_train, scenario_names
+from a2cm_phys.config import load_scenario, load_train, preset, scenario_names
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.train import EXIT_INTERRUPTED, EXIT_NONFINITE, Trainer, main
 
@@ -54,13 +54,17 @@ def _assert_same_run(a: Path, b: Path) -> None:
     np.testing.assert_array_equal(ca["stats"]["recent"], cb["stats"]["recent"])
 
 
+# A run extended with --updates anneals its learning rate over the new length: comparing
+# one with an uninterrupted run needs a constant schedule (a resume at the same length
+# is exact either way).
 GRID = ("--scenario", "grid", "--num-envs", "4", "--batch-size", "32", "--seed", "3")
+CONSTANT_LR = ("--set", "train.lr_schedule=constant")
 
 
 def test_resume_reproduces_uninterrupted_run(tmp_path: Path) -> None:
-    code, full = _run(tmp_path / "a", *GRID, "--updates", "20")
+    code, full = _run(tmp_path / "a", *GRID, *CONSTANT_LR, "--updates", "20")
     assert code == 0
-    code, part = _run(tmp_path / "b", *GRID, "--updates", "10")
+    code, part = _run(tmp_path / "b", *GRID, *CONSTANT_LR, "--updates", "10")
     assert code == 0 and checkpoint.load(part)["update"] == 10
     assert main(["--resume", str(part), "--updates", "20", "--no-progress"]) == 0
     _assert_same_run(full, part)
@@ -168,17 +172,20 @@ def test_same_seed_same_run_different_seed_differs(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("algo, critics", [("a2cm", 1), ("a2c", 3)])
+@pytest.mark.parametrize("paper", [True, False])
 def test_model_has_n_actors_and_right_number_of_critics(
-    tmp_path: Path, algo: str, critics: int
+    tmp_path: Path, algo: str, critics: int, paper: bool
 ) -> None:
     sc = load_scenario("grid")
-    trainer = Trainer(sc, load_train({"algo": algo}), tmp_path, record=False)
+    options = {**(preset("paper") if paper else {}), "algo": algo}
+    trainer = Trainer(sc, load_train(options), tmp_path, record=False)
     model, d, h, a, n = trainer.model, sc.obs_dim, 128, sc.actions, sc.pursuers
-    assert model.n_agents == n and model.n_critics == critics
+    k = 1 if paper else 2  # ours values the time and collision components apart
+    assert model.n_agents == n and model.n_critics == critics and model.n_values == k
     actor = sum(p.numel() for name, p in model.named_parameters() if name.startswith("actor"))
     critic = sum(p.numel() for name, p in model.named_parameters() if name.startswith("critic"))
     assert actor == n * (d * h + h + h * a + a)
-    assert critic == critics * (d * h + h + h + 1)
+    assert critic == critics * (d * h + h + k * h + k)
 
 
 @pytest.mark.parametrize("name", scenario_names())
@@ -205,7 +212,10 @@ def test_every_scenario_trains_a_few_updates(tmp_path: Path, name: str) -> None:
         (["--scenario", "grid", "--lr", "-1"], "lr"),
         (["--scenario", "grid", "--num-envs", "3"], "multiple of num_envs"),
         (["--scenario", "grid", "--seed", "-1"], "seed"),
-        (["--scenario", "phys", "--workers", "2"], "'workers': 2 processes for num_envs=1"),
+        (
+            ["--scenario", "phys", "--workers", "2", "--num-envs", "1"],
+            "'workers': 2 processes for num_envs=1",
+        ),
         (["--updates", "3"], "--scenario is required"),
         (["--resume", "does/not/exist"], "no checkpoint"),
     ],
