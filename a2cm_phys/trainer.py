@@ -123,7 +123,6 @@ class Trainer:
         self.stop_reason = ""
         self.last_summary: dict[str, Any] = {}
         self._last_save = time.perf_counter()
-        self._stop_requested = False
         self._phase = _IDLE
 
     # ------------------------------------------------------------------ state
