@@ -441,3 +441,19 @@ def test_collision_constraint_multiplier_follows_dual_ascent() -> None:
 def test_constraint_needs_split_components() -> None:
     with pytest.raises(ValueError, match="split_rewards"):
         load_train({"constrain_collisions": True, "split_rewards": False})
+
+
+def test_non_finite_rewards_change_nothing_under_our_settings() -> None:
+    cfg = Train()  # ours: PopArt normalisation, split components, advantage normalisation
+    m = ActorCritic(OBS, N, A, 16, shared_critic=True, n_values=2)
+    learner = Learner(m, cfg)
+    batch = trainer_batch(seed=3)
+    batch["reward_parts"] = np.stack([batch["rewards"], np.zeros_like(batch["rewards"])], -1)
+    learner.update(batch)
+    before, norm = params(m), learner.value_norm.state_dict()
+    batch["reward_parts"][2, 1, 0] = float("nan")
+    with pytest.raises(NonFiniteLoss, match="non-finite"):
+        learner.update(batch)
+    assert all(torch.equal(p, q) for p, q in zip(before, m.parameters(), strict=True))
+    after = learner.value_norm.state_dict()
+    assert all(torch.equal(norm[k], after[k]) for k in norm)

@@ -144,6 +144,10 @@ class Learner:
                 cfg.gamma,
                 cfg.gae_lambda,
             )
+            if not np.isfinite(adv).all():  # before anything (normaliser, λ) changes
+                raise NonFiniteLoss(
+                    "non-finite returns (no step taken)", {"loss": math.nan, "grad_norm": math.nan}
+                )
             returns = torch.as_tensor(adv, device=dev) + values.double()
             if self.value_norm is not None:  # rescales the output layer (PopArt)
                 self.value_norm.update(returns, model.critic_out)
