@@ -2,7 +2,9 @@
 
 One trainer for both algorithms; only the model differs (``make_model``: one critic for
 A2CM, N for A2C). Each update collects ``batch_size`` steps (``batch_size / num_envs`` per
-game) and takes one learner step. The command line over it is :mod:`a2cm_phys.train`.
+game) and takes one learner step per team (:mod:`a2cm_phys.teams`: the pursuers, and a
+learned evader when the scenario has one). The command line over it is
+:mod:`a2cm_phys.train`.
 
 ``Trainer.resume`` continues bit for bit in grid mode (an interrupted and resumed run
 ends with the same weights and episode statistics as an uninterrupted one). In physics
