@@ -3,13 +3,14 @@
     python benchmarks/bench_collision.py --variants paper16,ours --seeds 0-4 \
         --scenarios grid_collision,grid_collision_continue [--algos a2cm,a2c] [--jobs 2]
 
-Each variant is the paper's method (``--preset paper``) with the options of ``VARIANTS``;
-``ours`` is the defaults. Every run has 640,000 steps unless ``--steps`` says otherwise. A
-run is trained, then its greedy and sampled policies play ``--episodes`` evaluation
-episodes; a row gives medians over seeds of the mean capture steps
-(greedy, sampled), the collisions per episode, the return relative to the optimum's (raw
-reward) and the wall time, beside the exact optimum (``a2cm_phys.oracle``). Runs go to a
-process pool (``--jobs``), so wall times are only comparable within one invocation.
+A variant is ``ours`` (the defaults), or the paper's method (``--preset paper``) with 16
+games plus ``+``-separated pieces (``PIECES``), e.g. ``+split+advnorm+anneal``. Every run
+has 640,000 steps unless ``--steps`` says otherwise. A run is trained, then its greedy and
+sampled policies play ``--episodes`` evaluation episodes; a row gives medians over seeds of
+the mean capture steps (greedy, sampled), the collisions per episode, the return relative
+to the reference's (raw reward) and the wall time, beside the reference: the exact optimum
+on grids, the better of the oracle driven in physics and pursuit in physics mode. Runs go
+to a process pool (``--jobs``), so wall times are only comparable within one invocation.
 """
 
 from __future__ import annotations
@@ -22,178 +23,60 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
-VARIANTS: dict[str, dict[str, Any]] = {
-    # the paper's method with 16 games (the paper's own run has 1 game)
-    "paper16": {"num_envs": 16},
-    "+advnorm": {"num_envs": 16, "normalize_advantages": True},
-    "+popart": {"num_envs": 16, "value_norm": True},
-    "+popart+advnorm": {"num_envs": 16, "value_norm": True, "normalize_advantages": True},
-    "+split": {"num_envs": 16, "value_norm": True, "split_rewards": True},
-    "+split+advnorm": {
-        "num_envs": 16,
+PIECES: dict[str, dict[str, Any]] = {
+    "advnorm": {"normalize_advantages": True},
+    "popart": {"value_norm": True},
+    "split": {"value_norm": True, "split_rewards": True},
+    "splitraw": {"value_norm": True, "split_rewards": True, "balance_rewards": False},
+    "gae": {"gae_lambda": 0.95},
+    "adam": {"optimizer": "adam", "lr": 1e-3},
+    "adam3e-3": {"optimizer": "adam", "lr": 3e-3},
+    "b256": {"num_envs": 32, "batch_size": 256},
+    "ent1e-2": {"entropy_coef": 1e-2},
+    "ent1e-3": {"entropy_coef": 1e-3},
+    "clip": {"max_grad_norm": 0.5},
+    "anneal": {"lr_schedule": "linear"},
+    "lr3e-3": {"lr": 3e-3},
+    "lr1e-2": {"lr": 1e-2},
+    "lr2e-2": {"lr": 2e-2},
+    "beta.99": {"value_norm_beta": 0.99},
+    "cw3": {"collision_weight": 3.0},
+    "lagrange": {"value_norm": True, "split_rewards": True, "constrain_collisions": True},
+    "lagrange10": {
         "value_norm": True,
         "split_rewards": True,
-        "normalize_advantages": True,
-    },
-    "+split+gae": {"num_envs": 16, "value_norm": True, "split_rewards": True, "gae_lambda": 0.95},
-    "+split+adam": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "optimizer": "adam",
-        "lr": 1e-3,
-    },
-    "+advnorm+gae": {"num_envs": 16, "normalize_advantages": True, "gae_lambda": 0.95},
-    "+advnorm+adam": {
-        "num_envs": 16,
-        "normalize_advantages": True,
-        "optimizer": "adam",
-        "lr": 1e-3,
-    },
-    "+advnorm+b256": {"num_envs": 32, "batch_size": 256, "normalize_advantages": True},
-    "+advnorm+ent": {"num_envs": 16, "normalize_advantages": True, "entropy_coef": 1e-2},
-    "+advnorm+clip": {"num_envs": 16, "normalize_advantages": True, "max_grad_norm": 0.5},
-    "+advnorm+anneal": {"num_envs": 16, "normalize_advantages": True, "lr_schedule": "linear"},
-    "+split+anneal": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "lr_schedule": "linear",
-    },
-    "+split+advnorm+anneal": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "lr_schedule": "linear",
-    },
-    "+advnorm+lr3e-3": {"num_envs": 16, "normalize_advantages": True, "lr": 3e-3},
-    "+lagrange": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "constrain_collisions": True,
-    },
-    "+lagrange+anneal": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "constrain_collisions": True,
-        "lr_schedule": "linear",
-    },
-    "+lagrange10+anneal": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
         "constrain_collisions": True,
         "lagrange_lr": 10.0,
-        "lr_schedule": "linear",
     },
-    "+split+advnorm+anneal+gae": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "lr_schedule": "linear",
-        "gae_lambda": 0.95,
-    },
-    "+split+advnorm+anneal+ent": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "lr_schedule": "linear",
-        "entropy_coef": 1e-3,
-    },
-    "+split+advnorm+anneal+lr1e-2": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "lr_schedule": "linear",
-        "lr": 1e-2,
-    },
-    "+splitraw+advnorm+anneal": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "lr_schedule": "linear",
-        "balance_rewards": False,
-    },
-    "+split+advnorm+anneal+lr1e-2+beta.99": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "lr_schedule": "linear",
-        "lr": 1e-2,
-        "value_norm_beta": 0.99,
-    },
-    "+split+advnorm+anneal+lr2e-2": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "lr_schedule": "linear",
-        "lr": 2e-2,
-    },
-    "+split+advnorm+anneal+lr2e-2+beta.99": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "lr_schedule": "linear",
-        "lr": 2e-2,
-        "value_norm_beta": 0.99,
-    },
-    "+split+advnorm+anneal+adam3e-3": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "lr_schedule": "linear",
-        "optimizer": "adam",
-        "lr": 3e-3,
-    },
-    "+split+advnorm+anneal+lr1e-2+cw3": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "lr_schedule": "linear",
-        "lr": 1e-2,
-        "collision_weight": 3.0,
-    },
-    "+split+advnorm+anneal+adam3e-3+cw3": {
-        "num_envs": 16,
-        "value_norm": True,
-        "split_rewards": True,
-        "normalize_advantages": True,
-        "lr_schedule": "linear",
-        "optimizer": "adam",
-        "lr": 3e-3,
-        "collision_weight": 3.0,
-    },
-    "ours": {},  # the defaults
 }
+"""The pieces a variant name combines: ``+split+advnorm+anneal`` is the union of three."""
+
+
+def variant_options(name: str) -> dict[str, Any]:
+    """Training options of a variant: ``ours`` (the defaults), ``paper16`` (the paper's
+    method with 16 games) or ``paper16`` plus ``+``-separated :data:`PIECES`."""
+    from a2cm_phys.config import preset
+
+    if name == "ours":
+        return {}
+    options = {**preset("paper"), "num_envs": 16}
+    for piece in name.removeprefix("paper16").split("+")[1:]:
+        if piece not in PIECES:
+            raise ValueError(f"unknown piece {piece!r} in {name!r} (pieces: {', '.join(PIECES)})")
+        options.update(PIECES[piece])
+    return options
 
 
 def run(scenario: str, algo: str, variant: str, seed: int, steps: int, episodes: int) -> dict:
     """Train one run and evaluate it; returns a row of figures."""
     import torch
 
-    from a2cm_phys.config import load_scenario, load_train, preset
+    from a2cm_phys.config import load_scenario, load_train
     from a2cm_phys.evaluate import model_policy, play
     from a2cm_phys.train import Trainer
 
     torch.set_num_threads(1)
-    # every variant is the paper's method (--preset paper) plus its options; "ours" is the
-    # defaults
-    options = {} if variant == "ours" else {**preset("paper"), **VARIANTS[variant]}
+    options = variant_options(variant)
     batch = options.get("batch_size", load_train(options).batch_size)
     cfg = load_train({**options, "algo": algo, "seed": seed, "updates": steps // batch})
     sc = load_scenario(scenario)
@@ -257,7 +140,7 @@ def parse_seeds(text: str) -> list[int]:
 def main() -> int:
     """Run the grid of variants × scenarios × algos × seeds and print the table."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--variants", default=",".join(VARIANTS))
+    p.add_argument("--variants", default="paper16,+advnorm,+split+advnorm+anneal,ours")
     p.add_argument("--scenarios", default="grid_collision")
     p.add_argument("--algos", default="a2cm")
     p.add_argument("--seeds", default="0-1")
@@ -266,9 +149,11 @@ def main() -> int:
     p.add_argument("--jobs", type=int, default=2)
     args = p.parse_args()
     variants = args.variants.split(",")
-    unknown = [v for v in variants if v not in VARIANTS]
-    if unknown:
-        p.error(f"unknown variants {unknown} (known: {', '.join(VARIANTS)})")
+    try:
+        for v in variants:
+            variant_options(v)
+    except ValueError as err:
+        p.error(str(err))
     jobs = [
         (s, a, v, seed, args.steps, args.episodes)
         for s in args.scenarios.split(",")
