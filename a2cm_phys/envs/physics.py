@@ -59,7 +59,6 @@ from .core import (
     parse_positions,
     settle,
 )
-from .evader import STAY
 from .evader_learned import refuse_evader_actions
 from .factory import make_evader
 
@@ -138,7 +137,6 @@ class World:
         "_walls",
         "addresses",
         "bodies",
-        "commands",
         "controls",
         "cp_space",
         "probes",
@@ -198,7 +196,6 @@ class World:
         self._hooked: Any = None  # the space's handler, when it calls C callbacks
         self.space: pymunk.Space | None = None
         self.servos: list[pymunk.PivotJoint] = []
-        self.commands: list[int] = []  # the action each control body executes
         self.rebuild(xy)
 
     def rebuild(self, xy: np.ndarray) -> None:
@@ -233,7 +230,6 @@ class World:
             servo.max_force = self._max_force
             space.add(body, shape, servo)
             self.servos.append(servo)
-        self.commands = [STAY] * len(self.bodies)
         self.tracker.clear()
         # One wildcard handler: the pairs that can touch are exactly the ones we record
         # (pursuer-pursuer, pursuer-evader, agent-wall; static walls never touch each
@@ -518,7 +514,6 @@ class PhysicsCore(StateViews):
         self._continuous = scenario.continuous
         self._dt = ph.dt / ph.substeps
         self._velocities = (ACTION_DELTAS * ph.max_speed).astype(np.float64)  # (moves, 2)
-        self._velocity = [tuple(v) for v in self._velocities.tolist()]
         self._worlds = [World(scenario, self._start, self._table) for _ in range(num_envs)]
         self._spares: list[World] = []  # worlds rebuilt at the default start in advance
         self._retired: list[World] = []  # worlds replaced by spares, to be rebuilt as spares
@@ -607,81 +602,50 @@ class PhysicsCore(StateViews):
             self._give(evader_actions)
         elif evader_actions is not None:
             raise refuse_evader_actions(self.scenario)
-        if self._continuous:
-            return self._step_continuous(actions)
-        sc, n = self.scenario, self.scenario.pursuers
-        pos = self._state[:, 0]
-        evader = self._evader.moves(self.episode_seed, self.t, pos[:, n], pos[:, :n])
-        self.t += 1
-        if self._addresses is not None:
-            moves = np.concatenate((actions, evader[:, None]), axis=1)
-            return self._advance(self._velocities[moves], evader)
-        velocity, dt, substeps = self._velocity, self._dt, range(sc.physics.substeps)
-        state = []
-        events = []
-        for world, row, e, step in zip(
-            self._worlds, actions.tolist(), evader.tolist(), self.t.tolist(), strict=True
-        ):
-            row.append(e)
-            commands = world.commands
-            if row != commands:  # setting a velocity costs microseconds: only changes
-                for i, (steer, a, was) in enumerate(
-                    zip(world.steering, row, commands, strict=True)
-                ):
-                    if a != was:
-                        steer(velocity[a])
-                        commands[i] = a
-            space_step = world.step
-            for _ in substeps:
-                space_step(dt)
-            events.append(world.tracker.end_step(step))
-            for probe in world.probes:
-                v = probe()
-                state += v.x, v.y
-        self._state[:] = np.array(state).reshape(self._state.shape)
-        return self._score(events, evader)
-
-    def _step_continuous(self, actions: np.ndarray) -> StepOutcome:
         n = self.scenario.pursuers
         pos = self._state[:, 0]
         evader = self._evader.moves(self.episode_seed, self.t, pos[:, n], pos[:, :n])
         self.t += 1
-        commands = np.concatenate((actions, evader[:, None]), axis=1)
-        velocities = clip_to_disc(commands) * self.scenario.physics.max_speed
-        if self._addresses is not None:
-            return self._advance(velocities, evader)
-        velocities = velocities.tolist()
+        if self._continuous:
+            commands = np.concatenate((actions, evader[:, None]), axis=1)
+            velocities = clip_to_disc(commands) * self.scenario.physics.max_speed
+        else:
+            velocities = self._velocities[np.concatenate((actions, evader[:, None]), axis=1)]
+        return self._advance(velocities, evader)
+
+    def _advance(self, velocities: np.ndarray, evader: np.ndarray) -> StepOutcome:
+        """Step every game with the servo ``velocities`` ``(B, N + 1, 2)``: through the
+        bodies' memory where it was found (one scatter steers every control body, one
+        gather reads every body), else per body through pymunk. The same numbers either
+        way: setting a kinematic body's velocity is only the store (chipmunk wakes dynamic
+        bodies alone), and games are independent, so steering all before stepping any
+        changes nothing."""
         dt, substeps = self._dt, range(self.scenario.physics.substeps)
-        state = []
         events = []
-        for world, row, step in zip(self._worlds, velocities, self.t.tolist(), strict=True):
+        if self._addresses is not None:
+            self._memory[self._write] = velocities
+            space_step = self._cp_step
+            for world, step in zip(self._worlds, self.t.tolist(), strict=True):
+                space = world.cp_space
+                for _ in substeps:
+                    space_step(space, dt)
+                events.append(world.tracker.end_step(step))
+            self._state[:] = self._memory[self._read]
+            return self._score(events, evader)
+        state = []
+        for world, row, step in zip(
+            self._worlds, velocities.tolist(), self.t.tolist(), strict=True
+        ):
             for steer, v in zip(world.steering, row, strict=True):
                 steer(v)
-            space_step = world.step
+            world_step = world.step
             for _ in substeps:
-                space_step(dt)
+                world_step(dt)
             events.append(world.tracker.end_step(step))
             for probe in world.probes:
                 v = probe()
                 state += v.x, v.y
         self._state[:] = np.array(state).reshape(self._state.shape)
-        return self._score(events, evader)
-
-    def _advance(self, velocities: np.ndarray, evader: np.ndarray) -> StepOutcome:
-        """Step every game with the servo ``velocities`` ``(B, N + 1, 2)`` through the bodies'
-        memory: one scatter steers every control body, one gather reads every body. The
-        same numbers as the per-body calls: setting a kinematic body's velocity is only
-        the store (chipmunk wakes dynamic bodies alone), and games are independent, so
-        steering all before stepping any changes nothing."""
-        self._memory[self._write] = velocities
-        dt, substeps, space_step = self._dt, range(self.scenario.physics.substeps), self._cp_step
-        events = []
-        for world, step in zip(self._worlds, self.t.tolist(), strict=True):
-            space = world.cp_space
-            for _ in substeps:
-                space_step(space, dt)
-            events.append(world.tracker.end_step(step))
-        self._state[:] = self._memory[self._read]
         return self._score(events, evader)
 
     def _score(self, events: list[list], evader: np.ndarray) -> StepOutcome:
