@@ -173,7 +173,7 @@ def test_state_dict_resume_is_bit_exact() -> None:
     b.load_state_dict(saved)
     a.load_state_dict(saved)
     obs = np.random.default_rng(0).random((2, OBS), dtype=np.float32)
-    np.testing.assert_array_equal(a.model.logits_np(obs), b.model.logits_np(obs))
+    np.testing.assert_array_equal(a.model.outputs_np(obs), b.model.outputs_np(obs))
     for s in range(3, 5):
         assert a.update(random_batch(seed=s)) == b.update(random_batch(seed=s))
     for p, q in zip(a.model.parameters(), b.model.parameters(), strict=True):

@@ -47,7 +47,7 @@ def test_shapes(shared: bool) -> None:
     logits, values = m(torch.randn(5, 2, OBS))
     assert logits.shape == (5, 2, N, A)
     assert values.shape == (5, 2, m.n_critics)
-    assert m.policy_logits(torch.randn(OBS)).shape == (N, A)
+    assert m.actor_outputs(torch.randn(OBS)).shape == (N, A)
     assert m.value(torch.randn(OBS)).shape == (m.n_critics,)
 
 
@@ -137,11 +137,11 @@ def test_greedy_uses_no_randomness() -> None:
 def test_snapshot_follows_load_state_dict() -> None:
     m, other = model(True, seed=0), model(True, seed=1)
     obs = np.random.default_rng(0).random((3, OBS), dtype=np.float32)
-    before = m.logits_np(obs)
+    before = m.outputs_np(obs)
     m.load_state_dict(other.state_dict())
-    after = m.logits_np(obs)
+    after = m.outputs_np(obs)
     assert not np.allclose(before, after)
-    np.testing.assert_allclose(after, other.logits_np(obs))
+    np.testing.assert_allclose(after, other.outputs_np(obs))
 
 
 def test_sample_categorical_extreme_logits() -> None:

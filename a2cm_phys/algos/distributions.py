@@ -16,7 +16,6 @@ for ``action_shape`` and ``action_dtype``.
 
 from __future__ import annotations
 
-import math
 from typing import Protocol
 
 import numpy as np
@@ -111,7 +110,3 @@ def sample_categorical(logits: np.ndarray, rng: np.random.Generator) -> np.ndarr
     """
     return (logits + rng.gumbel(size=logits.shape)).argmax(-1).astype(np.int64, copy=False)
 
-
-def gaussian_entropy(log_std: np.ndarray) -> float:
-    """Entropy (nats) of a diagonal Gaussian with these log-stds, for reports."""
-    return float(np.sum(log_std + 0.5 * math.log(2 * math.pi * math.e)))

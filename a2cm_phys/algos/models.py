@@ -151,7 +151,6 @@ class ActorCritic(nn.Module):
         """Actor outputs ``(..., N, n_outputs)`` (logits or means) for ``(..., obs_dim)``."""
         return self.actor_out(F.relu(self.actor_hidden.forward_shared(obs)))
 
-    policy_logits = actor_outputs
 
     def distribution(self, obs: torch.Tensor) -> D.Distribution:
         """The policy of every agent at ``obs``: a distribution of batch shape ``(..., N)``."""
@@ -195,7 +194,6 @@ class ActorCritic(nn.Module):
         out += b2
         return out.reshape(*out.shape[:-1], self.n_agents, self.dist.n_outputs)
 
-    logits_np = outputs_np
 
     def action_probs_np(self, obs: np.ndarray) -> np.ndarray:
         """Softmax action probabilities ``(B, N, A)`` of discrete actors, as numpy float64."""
