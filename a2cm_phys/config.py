@@ -250,7 +250,7 @@ class Train:
             raise _KeyError("gae_lambda", f"must be in [0, 1], got {self.gae_lambda}")
         if not self.adam_eps > 0:
             raise _KeyError("adam_eps", f"must be > 0, got {self.adam_eps}")
-        for key in ("collision_budget", "lagrange_lr", "collision_weight"):
+        for key in ("collision_budget", "lagrange_lr", "collision_weight", "exploit_every"):
             if getattr(self, key) < 0:
                 raise _KeyError(key, f"must be >= 0, got {getattr(self, key)}")
         if self.constrain_collisions and not (self.split_rewards and self.value_norm):

@@ -130,12 +130,12 @@ def matchup(
     """
     from .evaluate import load_run, model_policy
 
-    pursuer_run = None if pursuers in PURSUER_POLICIES else load_run(pursuers)
+    pursuer_run = None if pursuers in PURSUER_POLICIES else _run(load_run, "--pursuers", pursuers)
     evader_model, evader_name = None, evader or scenario.evader
     if evader == BEST_RESPONSE:
         evader_model, evader_name = best_response_evader(scenario, pursuers), "learned"
     elif evader is not None and evader not in EVADER_POLICIES:
-        run = load_run(evader)
+        run = _run(load_run, "--evader", evader)
         if run.evader is None:
             raise ConfigError(f"--evader {evader}: the run has no learned evader")
         evader_model, evader_name = run.evader, "learned"
@@ -176,6 +176,17 @@ def best_response_evader(scenario: Scenario, pursuers: str):
     except (SourceError, TooLargeError, UnsupportedError) as err:
         raise ConfigError(f"--evader best-response: {err}") from None
     return TablePolicy(twin, policy)
+
+
+def _run(load, option: str, spec: str):
+    """A run directory named by ``option``, or an error that also lists the named policies."""
+    names = PURSUER_POLICIES if option == "--pursuers" else (*EVADER_POLICIES, BEST_RESPONSE)
+    try:
+        return load(spec)
+    except ConfigError as err:
+        raise ConfigError(
+            f"{option} {spec}: not one of {', '.join(names)}, nor a run ({err})"
+        ) from None
 
 
 def _short(path: str | None) -> str:
