@@ -1,244 +1,187 @@
-"""Rerun the paper's three experiments with several seeds, in both modes, and report.
+"""The reproduction report: every claim of the paper and ours, from real runs.
 
-    python -m a2cm_phys.experiments [--seeds 0-4] [--modes grid,physics] [--out docs]
+    python -m a2cm_phys.experiments [--groups paper,ours,continuous,selfplay] [--seeds 0-4]
+        [--dry-run] [--sequential] [--logdir logs/experiments] [--out docs]
 
-Experiments (SPEC §4, §7): 1 no collision penalty, 2 a collision terminates, 3 collisions
-penalised only; each × A2C and A2CM × grid and physics mode × seeds, 640,000 steps per
-run (the paper's 5,000 updates of 128 steps). The runs go through :mod:`a2cm_phys.sweep`
-(Ray when installed), so finished runs are skipped and unfinished ones resumed. The report
-``<out>/RESULTS.md`` puts our figures (mean ± 95% CI across seeds) beside the paper's
-single runs and the exact optimum (:mod:`a2cm_phys.oracle`), with learning-curve PNGs
-drawn by :mod:`a2cm_phys.plot` from the MCAP logs alone.
+Groups of cells (scenario × algorithm × seed), each a sweep in ``<logdir>/<group>/``
+(:mod:`a2cm_phys.sweep`: Ray when installed, finished runs skipped, unfinished resumed):
+
+- ``paper``: the paper's three experiments (SPEC §4, §7) × A2C/A2CM × grid/physics with
+  ``--preset paper`` (the faithful reproduction), ``--updates`` each (the paper: 5,000);
+- ``ours``: the same with our defaults;
+- ``continuous``: ``phys_cont``, ``phys_cont_flee``, ``phys_cont_collision`` × A2C/A2CM,
+  beside ``pursuit`` played on the same scenario (``--cont-updates``, ``--cont-set``);
+- ``selfplay``: ``grid_vs`` × A2C/A2CM pursuers against a learning evader, the cross-play
+  table and the exact exploitability of the final actors (``--exploit-max-steps``
+  truncates the best response's horizon, ``--no-exploit`` skips it).
+
+Before training, one short timed run per cell type gives the wall-time estimate per group
+(``--dry-run`` lists the runs and the estimate, and stops). The report ``<out>/RESULTS.md``
+opens with the claims table (measured figures, 95% CIs, verdicts and tests), then the
+tables (each row linking its runs), figures drawn by :mod:`a2cm_phys.plot` (x in
+environment steps, mean across seeds with a 95% band, the optimum or reference dashed),
+the per-cell and total wall time, and any run that could not be made.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import platform
 import shlex
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from datetime import datetime
-from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from .cli import (
     Parser,
-    add_logdir,
-    add_scenario_options,
     check_device,
     int_range,
     run_cli,
     split_assignments,
-    train_values,
     writable_dir,
 )
 from .config import ConfigError, load_train
-from .stats import t_interval
-from .sweep import Outcome, RunSpec, run_all
+from .report.plan import (
+    ALGOS,
+    EXPERIMENTS,
+    GROUPS,
+    MODES,
+    GroupOptions,
+    PlannedRun,
+    check_groups,
+    estimate_seconds,
+    plan,
+    time_cells,
+)
+from .sweep import Outcome, parse_seeds, run_all
 
-EXPERIMENTS = {
-    1: ("no collision", {"grid": "grid", "physics": "phys"}),
-    2: ("collision terminates", {"grid": "grid_collision", "physics": "phys_collision"}),
-    3: (
-        "collision penalised only",
-        {"grid": "grid_collision_continue", "physics": "phys_collision_continue"},
-    ),
-}
-"""Experiment number → (name, scenario per mode)."""
-
-PAPER = {  # SPEC §7: episodes completed and wall time (s) of the paper's single runs
-    1: {"a2c": (40_340, 14_567.45), "a2cm": (82_119, 14_458.28)},
-    2: {"a2c": (1_665, 14_173.42), "a2cm": (3_723, 14_659.00)},
-    3: {"a2c": (1_177, 13_981.22), "a2cm": (1_964, 19_519.85)},
-}
-ALGOS = ("a2c", "a2cm")
-
-
-@dataclass
-class RunResult:
-    """The figures of one finished run."""
-
-    experiment: int
-    mode: str
-    algo: str
-    seed: int
-    episodes: int
-    mean_steps_last10: float
-    collisions: int
-    wall_time: float
-    greedy_steps: float
-    greedy_capture_rate: float
-    run_dir: Path
-
-
-def measure(outcome: Outcome, experiment: int, mode: str, eval_episodes: int) -> RunResult:
-    """Read a finished run's log and evaluate its final greedy policy."""
-    from .evaluate import load_trained, model_policy, play
-    from .record import read_run
-
-    summary = outcome.summary or {}
-    run_dir = Path(summary["run_dir"])
-    log = read_run(run_dir)  # every part, each episode once
-    ends, lengths = log.episodes["t1"], log.episodes["length"]
-    last = ends >= 0.9 * ends.max() if len(ends) else np.zeros(0, dtype=bool)
-    scenario, model = load_trained(run_dir)
-    result = play(scenario, model_policy(model, greedy=True), eval_episodes, seed=10_000)
-    return RunResult(
-        experiment=experiment,
-        mode=mode,
-        algo=outcome.spec.algo,
-        seed=outcome.spec.seed,
-        episodes=int(summary["episodes"]),
-        mean_steps_last10=float(lengths[last].mean()) if last.any() else float("nan"),
-        collisions=int(summary["collisions"]),
-        wall_time=float(summary["wall_time_s"]),
-        greedy_steps=float(result.lengths.mean()),
-        greedy_capture_rate=float(result.captured.mean()),
-        run_dir=run_dir,
-    )
-
-
-def optimum(scenario_name: str) -> float | None:
-    """The exact optimal expected capture time from the start (grid scenarios only)."""
-    from .config import load_scenario
-    from .oracle import load_or_solve
-
-    scenario = load_scenario(scenario_name)
-    if scenario.mode != "grid":
-        return None
-    solution = load_or_solve(scenario)
-    return float(solution.distribution().mean_length())
-
-
-def _ci(values: Sequence[float], fmt: str = "{:,.1f}") -> str:
-    mean, half = t_interval(values)
-    if np.isnan(half):
-        return fmt.format(mean)
-    return f"{fmt.format(mean)} ± {fmt.format(half)}"
-
-
-def _compare(a2c: list[float], a2cm: list[float]) -> int:
-    """``+1`` if A2CM's mean is higher with disjoint 95% intervals, ``-1`` if lower, else 0."""
-    (ma, ha), (mm, hm) = t_interval(a2c), t_interval(a2cm)
-    if np.isnan(ha) or np.isnan(hm) or abs(mm - ma) <= ha + hm:
-        return 0
-    return 1 if mm > ma else -1
-
-
-def report(results: list[RunResult], modes: list[str], out: Path, meta: dict[str, Any]) -> str:
-    """The markdown of ``RESULTS.md``."""
-    lines = [
-        "# Reproduction of the paper's experiments",
-        "",
-        f"Generated by `{meta['command']}` on {meta['date']} ({meta['machine']}); "
-        f"{meta['runs']} runs (seeds: {meta['seeds']}), {meta['steps']:,} steps per run, "
-        f"{meta['num_envs']} games per run; the whole report took {meta['elapsed']:.0f} s.",
-        "",
-        "Figures are mean ± 95% confidence interval (Student t across seeds). The paper "
-        "reports single runs with one environment; *episodes* is the number of episodes "
-        "completed in training, *steps (last 10%)* the mean episode length over the last "
-        "10% of training, *greedy* the mean episode length of the final policy taking its "
-        "most probable actions over evaluation episodes. The optimum is the exact expected "
-        "capture time (`python -m a2cm_phys.oracle`).",
-        "",
-    ]
-    by = {}
-    for r in results:
-        by.setdefault((r.experiment, r.mode, r.algo), []).append(r)
-    for mode in modes:
-        lines += [
-            f"## {mode.capitalize()} mode",
-            "",
-            "| experiment | algo | episodes | paper episodes | steps (last 10%) | greedy "
-            "steps | optimum | collisions | wall time (s) | paper time (s) |",
-            "|---|---|---|---|---|---|---|---|---|---|",
-        ]
-        for exp, (name, scenarios) in EXPERIMENTS.items():
-            best = optimum(scenarios[mode])
-            for algo in ALGOS:
-                runs = by.get((exp, mode, algo), [])
-                if not runs:
-                    continue
-                paper_eps, paper_time = PAPER[exp][algo]
-                lines.append(
-                    f"| {exp}: {name} | {algo.upper()} | {_ci([r.episodes for r in runs])} | "
-                    f"{paper_eps:,} | {_ci([r.mean_steps_last10 for r in runs], '{:.2f}')} | "
-                    f"{_ci([r.greedy_steps for r in runs], '{:.2f}')} | "
-                    f"{'—' if best is None else f'{best:.3f}'} | "
-                    f"{_ci([r.collisions for r in runs])} | "
-                    f"{_ci([r.wall_time for r in runs])} | {paper_time:,.0f} |"
-                )
-        lines += ["", f"![{mode} learning curves](figures/{mode}_overview.png)", ""]
-    lines += ["## Where we agree with the paper, and where we do not", ""]
-    lines += agreement(by, modes)
-    return "\n".join(lines) + "\n"
-
-
-def agreement(by: dict[tuple[int, str, str], list[RunResult]], modes: list[str]) -> list[str]:
-    """Plain statements comparing our A2C/A2CM contrast with the paper's, per experiment."""
-    out = []
-    for mode in modes:
-        for exp, (name, _) in EXPERIMENTS.items():
-            a2c, a2cm = by.get((exp, mode, "a2c"), []), by.get((exp, mode, "a2cm"), [])
-            if not a2c or not a2cm:
-                continue
-            episodes = _compare([r.episodes for r in a2c], [r.episodes for r in a2cm])
-            steps = _compare(
-                [r.mean_steps_last10 for r in a2c], [r.mean_steps_last10 for r in a2cm]
-            )
-            verdict = {
-                1: "agree: A2CM completes more episodes",
-                0: "are inconclusive: the 95% intervals of A2C and A2CM overlap",
-                -1: "disagree: A2C completes more episodes",
-            }[episodes]
-            late = {1: "longer", 0: "not clearly different", -1: "shorter"}[steps]
-            out.append(
-                f"- **{mode}, experiment {exp} ({name})**: the paper has A2CM completing more "
-                f"episodes than A2C ({PAPER[exp]['a2cm'][0]:,} vs {PAPER[exp]['a2c'][0]:,}); "
-                f"our runs {verdict}. A2CM's episodes late in training are {late} than A2C's."
-            )
-    return out
-
-
-def figures(outcomes: list[Outcome], modes: list[str], out: Path) -> None:
-    """Learning curves per mode: the first seed of every experiment and algorithm."""
-    from .plot import load_run, plot_runs
-
-    for mode in modes:
-        runs, labels = [], []
-        for exp, (_, scenarios) in EXPERIMENTS.items():
-            for o in outcomes:
-                first_seed = min(x.spec.seed for x in outcomes)
-                if o.summary and o.spec.scenario == scenarios[mode] and o.spec.seed == first_seed:
-                    runs.append(load_run(Path(o.summary["run_dir"])))
-                    labels.append(f"exp {exp} {o.spec.algo.upper()}")
-        if runs:
-            written = plot_runs(runs, labels, out / "figures" / mode, window=500)
-            overview = next(p for p in written if p.name == "overview.png")
-            overview.replace(out / "figures" / f"{mode}_overview.png")
+__all__ = ["ALGOS", "EXPERIMENTS", "GROUPS", "build_parser", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m a2cm_phys.experiments`` argument parser."""
     p = Parser(prog="python -m a2cm_phys.experiments", description=__doc__.split("\n")[0])
-    p.add_argument("--seeds", default="0-4")
-    p.add_argument("--physics-seeds", help="seeds of the physics runs (default: --seeds)")
-    p.add_argument("--modes", default="grid,physics")
-    p.add_argument("--updates", type=int_range(1), default=5000, help="per run (the paper: 5,000)")
-    p.add_argument("--num-envs", type=int_range(1), default=16)
+    p.add_argument("--groups", default=",".join(GROUPS), help=f"comma-separated: {GROUPS}")
+    p.add_argument("--seeds", default="0-4", help="e.g. 0-4 or 1,3,7 (every group)")
+    p.add_argument("--modes", default="grid,physics", help="modes of the paper's experiments")
+    p.add_argument(
+        "--updates", type=int_range(1), default=5000, help="paper/ours runs (the paper: 5,000)"
+    )
+    p.add_argument("--cont-updates", type=int_range(1), default=5000, help="continuous runs")
+    p.add_argument("--selfplay-updates", type=int_range(1), default=5000, help="self-play runs")
+    for flag, what in (
+        ("--set", "every group: train.KEY=VALUE"),
+        ("--cont-set", "continuous runs: train.KEY=VALUE or a scenario KEY=VALUE"),
+        ("--selfplay-set", "self-play runs: train.KEY=VALUE"),
+    ):
+        p.add_argument(flag, action="extend", nargs="+", default=[], metavar="KEY=VALUE", help=what)
     p.add_argument("--eval-episodes", type=int_range(1, 10_000_000), default=2000)
-    add_logdir(p, "logs/experiments", "where the runs go (--sweep-dir: the old spelling)")
+    p.add_argument("--crossplay-episodes", type=int_range(1, 10_000_000), default=500)
+    p.add_argument(
+        "--exploit-max-steps",
+        type=int_range(1),
+        help="truncate the evader's exact best response at this horizon (faster; a lower "
+        "bound, said so in the report)",
+    )
+    p.add_argument("--no-exploit", action="store_true", help="skip the exact exploitability")
+    p.add_argument(
+        "--logdir", "--sweep-dir", dest="logdir", default="logs/experiments", help="runs go here"
+    )
     p.add_argument("--out", default="docs", help="where RESULTS.md and figures/ go")
     p.add_argument("--address", help="Ray cluster address")
     p.add_argument("--sequential", action="store_true", help="no Ray")
-    add_scenario_options(p, scenario=False)  # --set train.KEY=VALUE, --preset
+    p.add_argument("--dry-run", action="store_true", help="list the runs and the estimate; stop")
+    p.add_argument("--report-only", action="store_true", help="no training: report what exists")
+    p.add_argument(
+        "--estimate-updates",
+        type=int_range(0),
+        default=20,
+        help="updates of the timed short run per cell type (0: no estimate)",
+    )
     return p
+
+
+def _options(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, GroupOptions]]:
+    scenario, base = split_assignments(args.set)
+    if scenario:
+        raise ConfigError(
+            f"--set {next(iter(scenario))}: only train.KEY=VALUE (the scenarios are fixed;"
+            " --cont-set takes scenario keys)"
+        )
+    cont_scenario, cont_train = split_assignments(args.cont_set)
+    sp_scenario, sp_train = split_assignments(args.selfplay_set)
+    if sp_scenario:
+        raise ConfigError(f"--selfplay-set {next(iter(sp_scenario))}: only train.KEY=VALUE")
+    options = {
+        "paper": GroupOptions({"updates": args.updates}),
+        "ours": GroupOptions({"updates": args.updates}),
+        "continuous": GroupOptions({"updates": args.cont_updates, **cont_train}, cont_scenario),
+        "selfplay": GroupOptions({"updates": args.selfplay_updates, **sp_train}),
+    }
+    return base, options
+
+
+def _parallel(args: argparse.Namespace) -> tuple[int, str]:
+    if args.sequential:
+        return 1, "sequential"
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        return 1, "sequential (no Ray)"
+    cores = os.cpu_count() or 1
+    return cores, f"on Ray, {cores} at a time"
+
+
+def print_plan(
+    runs: list[PlannedRun], estimates: dict[tuple[str, str], Any], args: argparse.Namespace,
+    listing: bool,
+) -> None:  # fmt: skip
+    """The runs (with ``listing``) and the wall-time estimate per group, on stdout."""
+    parallel, how = _parallel(args)
+    horizon = 0 if args.no_exploit else args.exploit_max_steps
+    total = 0.0
+    print(f"{len(runs)} runs, training {how}")
+    for group in GROUPS:
+        mine = [r for r in runs if r.cell.group == group]
+        if not mine:
+            continue
+        states = [r.state for r in mine]
+        counts = ", ".join(f"{states.count(s)} {s}" for s in ("new", "partial", "done"))
+        if listing:
+            for r in mine:
+                print(f"  {group}/{r.spec.name}: {r.state}")
+        line = f"{group}: {len(mine)} runs ({counts})"
+        if estimates:
+            serial = sum(
+                estimate_seconds(
+                    r,
+                    estimates[(group, r.cell.scenario)],
+                    args.crossplay_episodes if group == "selfplay" else args.eval_episodes,
+                    horizon,
+                )
+                for r in mine
+            )
+            wall = serial / min(parallel, max(1, len(mine)))
+            total += wall
+            line += f", ~{duration(serial)} of runs, ~{duration(wall)} wall"
+        print(line)
+    if estimates:
+        print(
+            f"estimated total: ~{duration(total)} wall ({how}; from one timed "
+            f"{args.estimate_updates}-update run per cell type; runs sharing cores go slower)"
+        )
+
+
+def duration(seconds: float) -> str:
+    """``42 s``, ``17 min`` or ``2.3 h``."""
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -248,67 +191,67 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _main(argv: Sequence[str]) -> int:
     args = build_parser().parse_args(argv)
-    from .sweep import check_reusable, parse_seeds
-
     start = time.perf_counter()
+    groups = check_groups(args.groups)
     seeds = parse_seeds(args.seeds)
-    mode_seeds = {"grid": seeds, "physics": parse_seeds(args.physics_seeds or args.seeds)}
     modes = [m.strip() for m in args.modes.split(",") if m.strip()]
-    bad = [m for m in modes if m not in ("grid", "physics")]
+    bad = [m for m in modes if m not in MODES]
     if bad or not modes:
         raise ConfigError(f"--modes: unknown mode {(bad or [args.modes])[0]!r} (grid, physics)")
-    if split_assignments(args.set)[0]:
-        raise ConfigError("--set: only train.KEY=VALUE options (the scenarios are fixed)")
-    extra = train_values(args, {"updates": args.updates, "num_envs": args.num_envs})
-    cfg = load_train(extra)
-    check_device(cfg.device)
-    batch_size = cfg.batch_size
-    sweep_dir = writable_dir(args.logdir, "--logdir")
-    writable_dir(args.out, "--out")
-    train = extra
-    specs, where = [], {}
-    for exp, (_, scenarios) in EXPERIMENTS.items():
-        for mode in modes:
-            for algo in ALGOS:
-                for seed in mode_seeds[mode]:
-                    spec = RunSpec(scenarios[mode], algo, seed, train)
-                    check_reusable(spec, sweep_dir)
-                    specs.append(spec)
-                    where[spec.name] = (exp, mode)
-    sweep_dir.mkdir(parents=True, exist_ok=True)
+    base, options = _options(args)
+    check_device(load_train(base).device)
+    logdir = writable_dir(args.logdir, "--logdir")
+    out = writable_dir(args.out, "--out")
+    runs = plan(groups, modes, seeds, logdir, base, options)
+    estimates = {}
+    if args.estimate_updates and not args.report_only:
+        todo = [r for r in runs if r.state != "done"] or runs
+        estimates = time_cells(todo, args.estimate_updates, logdir / "estimate_cache.json")
+    print_plan(runs, estimates, args, listing=args.dry_run)
+    if args.dry_run:
+        return 0
+    errors: dict[str, str] = {}
+    use_ray = False
+    if not args.report_only:
+        for group in groups:
+            mine = [r for r in runs if r.cell.group == group]
+            sweep_dir = logdir / group
+            sweep_dir.mkdir(parents=True, exist_ok=True)
 
-    def done(o: Outcome) -> None:
-        what = o.summary.get("sweep") if o.summary else o.error
-        print(f"{o.spec.name}: {what}", file=sys.stderr, flush=True)
+            def done(o: Outcome, group: str = group) -> None:
+                what = o.summary.get("sweep") if o.summary else f"FAILED ({o.error})"
+                print(f"{group}/{o.spec.name}: {what}", file=sys.stderr, flush=True)
 
-    try:
-        outcomes, use_ray = run_all(specs, sweep_dir, done, args.address, 1.0, args.sequential)
-    except KeyboardInterrupt:
-        print("interrupted: finished runs are kept; run the same command to go on", file=sys.stderr)
-        return 130
-    failed = [o for o in outcomes if o.error]
-    results = [measure(o, *where[o.spec.name], args.eval_episodes) for o in outcomes if o.summary]
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    figures(outcomes, modes, out)
+            try:
+                outcomes, use_ray = run_all(
+                    [r.spec for r in mine], sweep_dir, done, args.address, 1.0, args.sequential
+                )
+            except KeyboardInterrupt:
+                print(
+                    "interrupted: finished runs are kept; run the same command to go on, or"
+                    " add --report-only for a report of what exists",
+                    file=sys.stderr,
+                )
+                return 130
+            errors.update({f"{group}/{o.spec.name}": o.error for o in outcomes if o.error})
+    from .report.build import build_report
+
     meta = {
         "command": shlex.join(["python", "-m", "a2cm_phys.experiments", *argv]),
         "date": datetime.now().strftime("%Y-%m-%d"),
-        "machine": f"{platform.machine()}, {__import__('os').cpu_count()} cores, "
-        f"{'Ray' if use_ray else 'sequential'}",
-        "runs": len(results),
-        "seeds": ", ".join(f"{len(mode_seeds[m])} in {m} mode" for m in modes),
-        "steps": args.updates * batch_size,
-        "num_envs": args.num_envs,
-        "elapsed": time.perf_counter() - start,
+        "machine": f"{platform.machine()} {platform.system()}, {os.cpu_count()} cores"
+        f" ({platform.processor() or 'cpu'}), Python {platform.python_version()}",
+        "parallel": "on Ray" if use_ray else _parallel(args)[1],
+        "seeds": args.seeds,
+        "eval_episodes": args.eval_episodes,
+        "budget": f"Updates of 128 steps: {args.updates:,} (paper, ours), "
+        f"{args.cont_updates:,} (continuous), {args.selfplay_updates:,} (self-play).",
     }
-    (out / "RESULTS.md").write_text(report(results, modes, out, meta))
-    rows = [{**r.__dict__, "run_dir": str(r.run_dir)} for r in results]
-    (out / "results.json").write_text(json.dumps({"meta": meta, "runs": rows}, indent=2) + "\n")
+    missing = build_report(runs, errors, out, logdir, meta, start, args, groups, modes)
     print(f"report: {out / 'RESULTS.md'}")
-    for o in failed:
-        print(f"FAILED {o.spec.name}: {o.error}", file=sys.stderr)
-    return 1 if failed else 0
+    for run, why in missing:
+        print(f"not in the report: {run.cell.group}/{run.spec.name}: {why}", file=sys.stderr)
+    return 1 if errors else 0
 
 
 if __name__ == "__main__":

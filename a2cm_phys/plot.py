@@ -10,17 +10,26 @@ error, not an empty figure. Writes ``returns.png``, ``lengths.png``, ``collision
 self-play: the evader's best response to the pursuers, i.e. their worst-case capture time,
 and the pursuers' best response to the learned evader, every K updates) against
 environment steps.
+
+``--group LABEL=RUN_DIR[,RUN_DIR…]`` (repeatable) or ``--mean`` plots a set of runs as
+seeds: one panel per scenario, one line per label (``--group``'s, else the log's
+algorithm), the mean across runs with a 95% band (Student t), against environment steps,
+the optimum (grid: the exact oracle) or a reference policy (physics: the oracle driven in
+physics, or ``pursuit`` under continuous control) dashed; writes ``lengths_mean.png`` and
+``returns_mean.png`` (the return relative to the reference's: 1 is as good, higher worse).
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .cli import Parser, int_range, run_cli, writable_dir
+from .cli import Parser, UsageError, int_range, run_cli, writable_dir
+from .config import Scenario
 from .record.reader import LogError, RunLog, read_run
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#17becf")
@@ -48,6 +57,8 @@ class Run:
     clean: bool
     exploit: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     """Sparse update metrics of :data:`EXPLOIT_SERIES`: ``(env_steps, values)`` where logged."""
+    scenario: Scenario | None = None
+    """The run's resolved scenario (from its log's metadata)."""
 
 
 def log_files(path: Path) -> list[Path]:
@@ -78,11 +89,36 @@ def load_run(path: Path) -> Run:
     if not log.n_episodes:
         raise LogError(f"{path}: the log holds no finished episode")
     columns = {k: log.episodes[k] for k in ("return", "length", "collisions", "captured")}
+    columns["env_steps"] = episode_env_steps(log)
     sc = log.scenario
     title = f"{sc.name} ({sc.mode}, collisions {sc.collisions.mode}, {sc.evader} evader)"
     return Run(
-        label=log.label, title=title, columns=columns, clean=log.clean, exploit=_exploit(log)
+        label=log.label,
+        title=title,
+        columns=columns,
+        clean=log.clean,
+        exploit=_exploit(log),
+        scenario=sc,
     )
+
+
+def episode_env_steps(log: RunLog) -> np.ndarray:
+    """Environment steps of the whole run (all games) when each episode ended.
+
+    The games step together, so an episode that ends at step ``k`` of its game ends after
+    about ``k × num_envs`` steps of the run; ``k`` is the sum of the lengths of its game's
+    episodes so far (a game restarted on a physics resume loses its unfinished episode).
+    """
+    lengths = np.asarray(log.episodes["length"], dtype=np.int64)
+    games = np.asarray(log.episodes["env"], dtype=np.int64)
+    train = log.metadata.get("train")
+    num_envs = int(train.get("num_envs", 1)) if isinstance(train, dict) else 1
+    num_envs = max(num_envs, int(games.max(initial=-1)) + 1)
+    per_game = np.zeros(len(lengths), dtype=np.int64)
+    for g in np.unique(games):
+        mask = games == g
+        per_game[mask] = np.cumsum(lengths[mask])
+    return per_game * num_envs
 
 
 def _exploit(log: RunLog) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -209,6 +245,172 @@ def _draw_exploit(ax: object, runs: list[Run], labels: list[str]) -> None:
     ax.legend(loc="best", fontsize=8, framealpha=0.85)
 
 
+# --------------------------------------------------------------------------- runs as seeds
+
+
+@dataclass(frozen=True)
+class Reference:
+    """A dashed line on aggregate panels: the optimum or a reference policy."""
+
+    name: str
+    length: float
+    ret: float
+
+
+@dataclass
+class Panel:
+    """One panel of an aggregate figure: a title, runs by label (seeds), a reference."""
+
+    title: str
+    runs: dict[str, list[Run]]
+    reference: Reference | None = None
+
+
+def binned(run: Run, column: str, edges: np.ndarray) -> np.ndarray:
+    """The mean of ``column`` over the episodes ending in each env-step bin (``nan`` where
+    none ends)."""
+    x = run.columns["env_steps"]
+    y = run.columns[column].astype(np.float64)
+    idx = np.clip(np.searchsorted(edges, x, side="left") - 1, 0, len(edges) - 2)
+    sums = np.bincount(idx, y, minlength=len(edges) - 1)
+    counts = np.bincount(idx, minlength=len(edges) - 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+
+
+def seed_band(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean over seeds (rows) per column and its 95% Student t band (``nan`` below two
+    seeds with a value)."""
+    from scipy import stats as st
+
+    values = np.asarray(values, dtype=np.float64)
+    n = np.sum(np.isfinite(values), axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-nan bins
+        mean = np.nanmean(values, axis=0)
+        sd = np.nanstd(values, axis=0, ddof=1)
+        t = st.t.ppf(0.975, np.maximum(n - 1, 1))
+        half = np.where(n >= 2, t * sd / np.sqrt(np.maximum(n, 1)), np.nan)
+    return mean, mean - half, mean + half
+
+
+def _spans_decades(values: np.ndarray) -> bool:
+    v = values[np.isfinite(values) & (values > 0)]
+    return bool(v.size) and float(v.max() / v.min()) > 20
+
+
+def plot_aggregate(
+    panels: list[Panel], column: str, path: Path, title: str, bins: int = 60
+) -> Path:
+    """One figure of ``panels`` side by side: ``column`` (``length`` or ``return``, the
+    latter relative to the panel's reference) per env-step bin, mean across each label's
+    runs with a 95% band, the reference dashed; log scale where values span decades."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cols = max(1, len(panels))
+    fig = Figure(figsize=(4.2 * cols + 0.6, 4.2), dpi=110, layout="constrained")
+    for k, panel in enumerate(panels):
+        ax = fig.add_subplot(1, cols, k + 1)
+        all_runs = [r for rs in panel.runs.values() for r in rs]
+        top = max((float(r.columns["env_steps"].max(initial=0)) for r in all_runs), default=1)
+        edges = np.linspace(0.0, max(top, 1.0), bins + 1)
+        centres = (edges[:-1] + edges[1:]) / 2
+        relative = column == "return" and panel.reference is not None and panel.reference.ret
+        drawn = []
+        for i, (label, runs) in enumerate(panel.runs.items()):
+            if not runs:
+                continue
+            colour = COLOURS[i % len(COLOURS)]
+            rows = np.array([binned(r, column, edges) for r in runs])
+            if relative:
+                rows = rows / panel.reference.ret
+            mean, lo, hi = seed_band(rows)
+            drawn.append(mean)
+            shown = np.isfinite(mean)  # bins where no episode ended are skipped, not gaps
+            ax.plot(
+                centres[shown],
+                mean[shown],
+                color=colour,
+                lw=1.8,
+                marker="." if shown.sum() < 15 else None,
+                label=f"{label} ({len(runs)} seeds)",
+            )
+            band = np.isfinite(lo) & np.isfinite(hi)
+            ax.fill_between(centres[band], lo[band], hi[band], color=colour, alpha=0.2, lw=0)
+        ref = panel.reference
+        if ref is not None:
+            level = 1.0 if relative else ref.length if column == "length" else ref.ret
+            if column == "length" or relative:
+                ax.axhline(level, color="k", ls="--", lw=1.2, label=f"{ref.name}: {level:.3g}")
+                drawn.append(np.array([level]))
+        values = np.concatenate(drawn) if drawn else np.zeros(0)
+        if _spans_decades(values):
+            ax.set_yscale("log")
+        ax.set_title(panel.title, fontsize=9)
+        ax.set_xlabel("environment steps")
+        if k == 0:
+            ax.set_ylabel(
+                "steps per episode"
+                if column == "length"
+                else "return ÷ reference's return (1 = as good)"
+                if relative
+                else "return (raw team reward)"
+            )
+        ax.grid(True, alpha=0.3)
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 3))
+        ax.legend(loc="best", fontsize=7, framealpha=0.85)
+    fig.suptitle(title, fontsize=10)
+    fig.savefig(path)
+    return path
+
+
+def reference_for(scenario: Scenario, episodes: int = 500) -> Reference | None:
+    """The dashed line of a scenario: the exact optimum on grids the oracle solves; in
+    physics mode the oracle driven in physics (discrete control) or ``pursuit``
+    (continuous), played greedy for ``episodes`` episodes; ``None`` where neither exists."""
+    from .config import ConfigError
+    from .evaluate import optimum, play
+    from .policies import pursuer_policy
+
+    if scenario.mode == "grid":
+        best = optimum(scenario)
+        if best is None:
+            return None
+        return Reference("optimum (oracle)", best["capture_steps"], best["return"])
+    name = "pursuit" if scenario.continuous else "oracle"
+    try:
+        policy = pursuer_policy(name, scenario)
+    except ConfigError:
+        return None
+    result = play(scenario, policy, episodes, seed=10_000)
+    return Reference(f"{name} (played)", float(result.lengths.mean()), float(result.returns.mean()))
+
+
+def parse_group(text: str) -> tuple[str, list[Path]]:
+    """``LABEL=DIR[,DIR…]`` → ``(LABEL, [DIR, …])``; a :class:`UsageError` otherwise."""
+    label, sep, dirs = text.partition("=")
+    paths = [Path(d.strip()) for d in dirs.split(",") if d.strip()]
+    if not sep or not label.strip() or not paths:
+        raise UsageError(f"--group {text!r}: expected LABEL=RUN_DIR[,RUN_DIR...]")
+    return label.strip(), paths
+
+
+def panels_of(
+    labelled: list[tuple[str, Run]], references: dict[str, Reference | None]
+) -> list[Panel]:
+    """Runs grouped into one panel per scenario (in first-seen order), one line per label."""
+    panels: dict[str, Panel] = {}
+    for label, run in labelled:
+        name = run.scenario.name if run.scenario else run.title
+        panel = panels.setdefault(name, Panel(name, {}, references.get(name)))
+        panel.runs.setdefault(label, []).append(run)
+    return list(panels.values())
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Plot the runs; return the exit code (2 on errors)."""
     return run_cli(_main, argv)
@@ -217,7 +419,25 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _main(argv: Sequence[str]) -> int:
     p = Parser(prog="python -m a2cm_phys.plot", description="Learning curves (PNG) from run logs.")
     p.add_argument(
-        "runs", type=Path, nargs="+", metavar="RUN_DIR", help="run folders (or episodes.mcap files)"
+        "runs", type=Path, nargs="*", metavar="RUN_DIR", help="run folders (or episodes.mcap files)"
+    )
+    p.add_argument(
+        "--group",
+        action="append",
+        default=[],
+        metavar="LABEL=DIR[,DIR...]",
+        help="runs of one label (seeds), plotted as a mean with a 95%% band (repeatable)",
+    )
+    p.add_argument(
+        "--mean",
+        action="store_true",
+        help="plot the runs as seeds: one panel per scenario, one line per label, mean ± 95%%",
+    )
+    p.add_argument(
+        "--reference-episodes",
+        type=int_range(0, 1_000_000),
+        default=500,
+        help="episodes the physics reference policy plays (0: no reference line)",
     )
     p.add_argument(
         "--out",
@@ -228,6 +448,11 @@ def _main(argv: Sequence[str]) -> int:
         "--window", type=int_range(1), default=100, help="moving-average window (episodes)"
     )
     args = p.parse_args(argv)
+    groups = [parse_group(g) for g in args.group]
+    if not args.runs and not groups:
+        raise UsageError("give run folders, or --group LABEL=RUN_DIR[,RUN_DIR...]")
+    if groups or args.mean:
+        return _main_mean(args, groups)
     out = args.out or (
         args.runs[0] if len(args.runs) == 1 and args.runs[0].is_dir() else Path("plots")
     )
@@ -237,6 +462,31 @@ def _main(argv: Sequence[str]) -> int:
         if not run.clean:
             print(f"note: {path}: a log was not closed cleanly; plotting what was recovered")
     for path in plot_runs(runs, _unique_labels(runs, args.runs), out, args.window):
+        print(f"wrote {path}")
+    return 0
+
+
+def _main_mean(args: object, groups: list[tuple[str, list[Path]]]) -> int:
+    out = args.out or Path("plots")
+    writable_dir(out, "--out")
+    labelled = [(label, load_run(p)) for label, paths in groups for p in paths]
+    labelled += [(run.label, run) for run in (load_run(p) for p in args.runs)]
+    references: dict[str, Reference | None] = {}
+    for _, run in labelled:
+        sc = run.scenario
+        if sc is not None and sc.name not in references:
+            grid = sc.mode == "grid"
+            references[sc.name] = (
+                reference_for(sc, args.reference_episodes)
+                if grid or args.reference_episodes
+                else None
+            )
+    panels = panels_of(labelled, references)
+    for column, name, what in (
+        ("length", "lengths_mean.png", "Steps per episode"),
+        ("return", "returns_mean.png", "Return relative to the reference"),
+    ):
+        path = plot_aggregate(panels, column, out / name, f"{what}: mean across seeds, 95% band")
         print(f"wrote {path}")
     return 0
 

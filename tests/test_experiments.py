@@ -1,46 +1,161 @@
-"""The experiments report runs end to end on a tiny configuration."""
+"""The reproduction report end to end on tiny budgets, its options, and its statistics."""
 
 from __future__ import annotations
 
 import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats as st
 
 from a2cm_phys import experiments
+from a2cm_phys.stats import (
+    iqm,
+    iqm_interval,
+    mean_interval,
+    probability_of_improvement,
+    ratio_interval,
+    verdict_bound,
+    verdict_test,
+    welch_p,
+)
+
+TINY = [
+    "--seeds", "0", "--modes", "grid", "--updates", "3", "--cont-updates", "3",
+    "--selfplay-updates", "3", "--eval-episodes", "4", "--crossplay-episodes", "2",
+    "--exploit-max-steps", "5", "--cont-set", "max_steps=40", "--sequential",
+    "--estimate-updates", "2",
+]  # fmt: skip
 
 
-def test_report_end_to_end_on_a_tiny_configuration(tmp_path):
-    out = tmp_path / "docs"
-    argv = [
-        "--seeds",
-        "0-1",
-        "--modes",
-        "grid",
-        "--updates",
-        "4",
-        "--num-envs",
-        "4",
-        "--eval-episodes",
-        "20",
-        "--sequential",
-        "--sweep-dir",
-        str(tmp_path / "runs"),
-        "--out",
-        str(out),
-    ]
+def test_report_end_to_end_on_tiny_budgets(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out, logdir = tmp_path / "docs", tmp_path / "runs"
+    argv = [*TINY, "--logdir", str(logdir), "--out", str(out)]
+    assert experiments.main([*argv, "--dry-run"]) == 0
+    dry = capsys.readouterr().out
+    assert "20 runs" in dry and "paper/grid_collision-a2cm-s0: new" in dry
+    assert re.search(r"continuous: 6 runs \(6 new.*wall", dry) and "estimated total" in dry
+    assert not (out / "RESULTS.md").exists()
+
     assert experiments.main(argv) == 0
     text = (out / "RESULTS.md").read_text()
-    for exp, (name, _) in experiments.EXPERIMENTS.items():
-        assert f"| {exp}: {name} | A2C |" in text and f"| {exp}: {name} | A2CM |" in text
-    assert "2.939" in text  # the oracle's optimum beside the learned policies
-    assert "82,119" in text  # the paper's figure beside ours
-    assert "Where we agree with the paper" in text
-    assert (out / "figures" / "grid_overview.png").stat().st_size > 10_000
-    runs = json.loads((out / "results.json").read_text())["runs"]
-    assert len(runs) == 12 and {r["algo"] for r in runs} == {"a2c", "a2cm"}
-    # a second invocation reuses the finished runs
+    claims = text[text.index("## Claims") : text.index("## The paper's experiments")]
+    for claim in (
+        "A2CM completes more episodes than A2C",
+        "A2CM settles near 6 steps",
+        "A2CM is better than A2C with collisions",
+        "A2CM trains in about the time A2C does",
+        "captures within 3.1 greedy steps",
+        "Our defaults learn faster",
+        "Continuous A2CM within 5% of pursuit",
+        "at least 20% faster than pursuit",
+        "less exploitable than the oracle",
+    ):
+        assert claim in claims, claim
+    assert re.search(r"\*\*(holds|does not hold|inconclusive)\*\* \| Welch t", claims)
+    assert "truncated to 5 steps" in claims  # --exploit-max-steps is said
+    assert "[s0](../runs/paper/grid-a2cm-s0)" in text  # rows link their runs
+    assert "2.939 (optimum)" in text and "82,119" in text
+    assert "Cross-play" in text and "evader: flee" in text
+    assert "a2cm_phys 0." in text and "Total wall time" in text
+    assert "Every planned run finished." in text
+    for name in re.findall(r"!\[[^]]*\]\((figures/[^)]+)\)", text):
+        assert (out / name).stat().st_size > 10_000, name
+    assert (out / "figures" / "paper_grid_lengths.png").exists()
+    data = json.loads((out / "results.json").read_text())
+    assert len(data["runs"]) == 20 and data["claims"]
+    assert (logdir / "paper" / "grid-a2c-s0" / "report_eval.json").exists()
+
+    # again: every run is skipped, every measurement comes from the caches
     assert experiments.main(argv) == 0
+    assert "skipped" in capsys.readouterr().err
+
+    # a run that is missing is listed, not fatal
+    (logdir / "ours" / "grid-a2c-s0" / "summary.json").unlink()
+    assert experiments.main([*argv, "--groups", "ours", "--report-only"]) == 0
+    text = (out / "RESULTS.md").read_text()
+    assert "Cells that could not be run" in text and "`ours/grid-a2c-s0`: interrupted" in text
 
 
-def test_bad_options_exit_2(capsys):
-    assert experiments.main(["--modes", "water"]) == 2
-    assert "--modes" in capsys.readouterr().err
-    assert experiments.main(["--set", "size=3"]) == 2
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["--groups", "paper,water"], ["--groups", "water", "selfplay"]),
+        (["--groups", "paper,paper"], ["--groups", "twice"]),
+        (["--seeds", "0-x"], ["--seeds"]),
+        (["--seeds", "1,1"], ["--seeds", "twice"]),
+        (["--modes", "water"], ["--modes"]),
+        (["--set", "size=3"], ["--set", "train.KEY"]),
+        (["--cont-set", "train.nope=1", "--dry-run"], ["nope"]),
+        (["--exploit-max-steps", "0"], ["--exploit-max-steps"]),
+    ],
+)
+def test_bad_options_are_one_line_errors(
+    argv: list[str], words: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = [*argv, "--logdir", str(tmp_path / "r"), "--out", str(tmp_path / "d")]
+    assert experiments.main([*argv, "--estimate-updates", "0"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error:") and err.count("\n") == 1 and "Traceback" not in err
+    for word in words:
+        assert word in err
+
+
+# --------------------------------------------------------------------------- statistics
+
+
+def test_mean_interval_is_students_t() -> None:
+    m, lo, hi = mean_interval([1.0, 2.0, 3.0])
+    half = st.t.ppf(0.975, 2) * 1.0 / np.sqrt(3)  # sd = 1
+    assert m == 2.0 and lo == pytest.approx(2 - half) and hi == pytest.approx(2 + half)
+    assert np.isnan(mean_interval([4.0])[1]) and mean_interval([4.0])[0] == 4.0
+    assert np.isnan(mean_interval([])[0])
+
+
+def test_welch_p_one_sided_and_degenerate_cases() -> None:
+    a, b = [5.0, 6.0, 7.0], [1.0, 2.0, 3.0]
+    # t = 4 / sqrt(2/3) with Welch df 4: a hand-checkable p
+    assert welch_p(a, b) == pytest.approx(st.t.sf(4 / np.sqrt(2 / 3), 4))
+    assert welch_p(a, b, "less") == pytest.approx(1 - welch_p(a, b))
+    assert np.isnan(welch_p([1.0], b))  # one seed: no test
+    assert welch_p([2.0, 2.0], [1.0, 1.0]) == 0.0  # no variance, different: certain
+    assert np.isnan(welch_p([1.0, 1.0], [1.0, 1.0]))
+
+
+def test_ratio_interval() -> None:
+    value, lo, hi = ratio_interval([2.0, 2.2, 1.8], [1.0, 1.0, 1.0])
+    assert value == pytest.approx(2.0) and 1.8 <= lo < 2.0 < hi <= 2.2
+    assert ratio_interval([3.0, 3.0], [1.5, 1.5]) == (2.0, 2.0, 2.0)
+    assert np.isnan(ratio_interval([1.0], [2.0])[1])
+
+
+def test_iqm_and_stratified_interval() -> None:
+    assert iqm([1, 2, 3, 4, 100, 5, 6, 7]) == pytest.approx(4.5)  # middle 4 of 8
+    value, lo, hi = iqm_interval([[1.0, 1.0], [3.0, 3.0]])
+    assert value == 2.0 and lo == hi == 2.0  # no spread within strata: no spread at all
+    value, lo, hi = iqm_interval([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
+    assert value == 3.5 and lo < 3.5 < hi
+
+
+def test_probability_of_improvement() -> None:
+    # task 1: X always above Y (1); task 2: a tie (1/2); the mean over tasks: 3/4
+    assert probability_of_improvement([[3, 4], [1]], [[1, 2], [1]]) == (0.75, 0.75, 0.75)
+    value, lo, hi = probability_of_improvement([[1.0, 3.0]], [[2.0, 2.0]])
+    assert value == 0.5 and lo == 0.0 and hi == 1.0
+
+
+def test_verdicts() -> None:
+    assert verdict_bound((3.0, 2.9, 3.05), at_most=3.1) == "holds"
+    assert verdict_bound((3.3, 3.2, 3.4), at_most=3.1) == "does not hold"
+    assert verdict_bound((3.1, 3.0, 3.2), at_most=3.1) == "inconclusive"
+    assert verdict_bound((6.0, 5.5, 6.5), at_least=5, at_most=7) == "holds"
+    assert verdict_bound((3.0, 2.9, 3.1), at_least=5, at_most=7) == "does not hold"
+    assert verdict_bound((3.0, np.nan, np.nan), at_most=7) == "inconclusive"
+    assert verdict_test(0.01, 0.99) == "holds"
+    assert verdict_test(0.99, 0.01) == "does not hold"
+    assert verdict_test(0.2, 0.8) == "inconclusive"
+    assert verdict_test(np.nan, np.nan) == "inconclusive"

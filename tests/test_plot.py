@@ -120,3 +120,36 @@ def test_exploitability_is_drawn_from_sparse_update_metrics(tmp_path: Path) -> N
         assert np.sum(np.all(np.abs(pixels.astype(int) - (31, 119, 180)) < 8, axis=1)) > 200
     main([str(tmp_path / "plain"), "--out", str(tmp_path / "none")])
     assert not (tmp_path / "none" / "exploitability.png").exists()
+
+
+def test_runs_grouped_by_label_are_plotted_as_seeds_against_env_steps(tmp_path: Path) -> None:
+    from a2cm_phys.plot import binned, seed_band
+
+    for algo in ("a2c", "a2cm"):
+        for seed in (0, 1):
+            make_log(tmp_path / f"{algo}{seed}" / "episodes.mcap", steps=120, seed=seed,
+                     algo=algo, label=None, log_every=0)  # fmt: skip
+    run = load_run(tmp_path / "a2c0")
+    steps, lengths, games = run.columns["env_steps"], run.columns["length"], 4
+    assert steps.max() <= 120 * games and np.all(steps % games == 0)
+    assert steps[0] == lengths[0] * games  # the first episode to end, in its game
+    out = tmp_path / "figs"
+    group = [f"--group=A2C={tmp_path / 'a2c0'},{tmp_path / 'a2c1'}",
+             f"--group=A2CM={tmp_path / 'a2cm0'},{tmp_path / 'a2cm1'}"]  # fmt: skip
+    assert main([*group, "--out", str(out)]) == 0
+    for name in ("lengths_mean.png", "returns_mean.png"):
+        with Image.open(out / name) as im:
+            assert im.size[0] > 400 and len(np.unique(np.asarray(im.convert("L")))) > 10
+    edges = np.array([0.0, 240.0, 480.0])
+    per_bin = binned(run, "length", edges)
+    first = steps <= 240
+    assert per_bin[0] == pytest.approx(lengths[first].mean())
+    mean, lo, hi = seed_band(np.array([[1.0, np.nan], [3.0, 5.0]]))
+    assert mean.tolist() == [2.0, 5.0] and np.isnan(lo[1]) and lo[0] < 2.0 < hi[0]
+
+
+def test_a_bad_group_is_a_one_line_error(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--group", "no-equals-sign"]) == 2
+    err = capsys.readouterr().err
+    assert "--group" in err and err.count("\n") == 1
+    assert main([]) == 2

@@ -1,0 +1,217 @@
+"""From finished runs to ``RESULTS.md``, ``results.json`` and the figures."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from .. import __version__
+from .claims import Data, our_claims, paper_claims
+from .markdown import report
+from .measure import (
+    RunResult,
+    cross_play,
+    exploit,
+    measure,
+    oracle_worst_case,
+    reference,
+)
+from .plan import EXPERIMENTS, PlannedRun
+
+
+def _why_missing(run: PlannedRun, errors: dict[str, str]) -> str:
+    key = f"{run.cell.group}/{run.spec.name}"
+    if key in errors:
+        return f"failed: {errors[key]}"
+    if run.state == "partial":
+        return "interrupted (its checkpoint is kept: the same command resumes it)"
+    return "not run"
+
+
+def collect(
+    runs: list[PlannedRun], errors: dict[str, str], eval_episodes: int
+) -> tuple[dict[tuple[str, str, str], list[RunResult]], list[tuple[PlannedRun, str]]]:
+    """The finished runs measured, by cell, and the runs that are missing (with why)."""
+    by_cell: dict[tuple[str, str, str], list[RunResult]] = {}
+    missing = []
+    for run in runs:
+        key = (run.cell.group, run.cell.scenario, run.cell.algo)
+        by_cell.setdefault(key, [])
+        if run.state != "done":
+            missing.append((run, _why_missing(run, errors)))
+            continue
+        try:
+            summary = json.loads((run.run_dir / "summary.json").read_text())
+            by_cell[key].append(measure(run, summary, eval_episodes))
+        except Exception as err:  # a damaged run must not sink the report
+            missing.append((run, f"could not be measured: {type(err).__name__}: {err}"))
+    return {k: v for k, v in by_cell.items() if v}, missing
+
+
+def _figures(data: Data, out: Path, groups: list[str], modes: list[str]) -> dict[str, Path]:
+    from ..plot import Panel, Reference, Run, load_run, plot_aggregate
+    from ..record.reader import LogError
+
+    def loaded(results: list[RunResult]) -> list[Run]:
+        out = []
+        for r in results:
+            try:  # a run without a finished episode (e.g. a tiny budget) draws nothing
+                out.append(load_run(r.run.run_dir))
+            except LogError:
+                continue
+        return out
+
+    def ref_of(scenario: str) -> Reference | None:
+        ref = data.references.get(scenario) or data.pursuit.get(scenario)
+        if not ref:
+            return None
+        return Reference(ref["policy"].replace(" (played)", ""), ref["length"], ref["return"])
+
+    def panel(group: str, scenario: str, title: str) -> Panel | None:
+        lines = {}
+        for algo in ("a2c", "a2cm"):
+            runs = loaded(data.runs(group, scenario, algo))
+            if runs:
+                lines[algo.upper()] = runs
+        return Panel(title, lines, ref_of(scenario)) if lines else None
+
+    layouts: list[tuple[str, str, list[Panel | None]]] = []
+    for group in ("paper", "ours"):
+        if group in groups:
+            for mode in modes:
+                panels = [
+                    panel(group, sc[mode], f"{exp}: {name}\n({sc[mode]})")
+                    for exp, (name, sc) in EXPERIMENTS.items()
+                ]
+                layouts.append((group, mode, panels))
+    if "continuous" in groups:
+        from .plan import CONTINUOUS
+
+        layouts.append(("continuous", "physics", [panel("continuous", s, s) for s in CONTINUOUS]))
+    if "selfplay" in groups:
+        layouts.append(("selfplay", "grid", [panel("selfplay", "grid_vs", "grid_vs")]))
+    written = {}
+    names = {"paper": "paper's method", "ours": "our defaults"}
+    for group, mode, panels in layouts:
+        panels = [p for p in panels if p is not None]
+        if not panels:
+            continue
+        what = f"{names.get(group, group)}, {mode}"
+        for column, kind, title in (
+            ("length", "lengths", "Steps per episode"),
+            ("return", "returns", "Return ÷ the reference's"),
+        ):
+            if group == "selfplay" and column == "return":
+                continue
+            path = out / "figures" / f"{group}_{mode}_{kind}.png"
+            plot_aggregate(panels, column, path, f"{title} ({what}; mean of seeds, 95% band)")
+            written[f"{group}/{mode}/{kind}"] = path
+    return written
+
+
+def build_report(
+    runs: list[PlannedRun],
+    errors: dict[str, str],
+    out: Path,
+    logdir: Path,
+    meta: dict[str, Any],
+    start: float,
+    args: argparse.Namespace,
+    groups: list[str],
+    modes: list[str],
+) -> list[tuple[PlannedRun, str]]:
+    """Measure the finished runs, write the report; return the runs it lacks."""
+    out.mkdir(parents=True, exist_ok=True)
+    logdir.mkdir(parents=True, exist_ok=True)
+    cache = logdir / "report_cache.json"
+    by_cell, missing = collect(runs, errors, args.eval_episodes)
+    data = Data(by_cell, {}, modes=modes, groups=groups)
+    overrides = {r.cell.scenario: r.spec.overrides for r in runs}
+    for group, scenario, _ in by_cell:
+        if group in ("paper", "ours") and scenario not in data.references:
+            data.references[scenario] = reference(
+                scenario, overrides[scenario], args.eval_episodes, cache
+            )
+        elif group == "continuous" and scenario not in data.pursuit:
+            data.pursuit[scenario] = reference(
+                scenario, overrides[scenario], args.eval_episodes, cache
+            )
+    crossplay: list[dict[str, Any]] = []
+    if "selfplay" in groups:
+        sp = {a: data.runs("selfplay", "grid_vs", a) for a in ("a2cm", "a2c")}
+        horizon = args.exploit_max_steps
+        if any(sp.values()) and not args.no_exploit:
+            data.oracle_worst_case = oracle_worst_case("grid_vs", horizon, cache)
+            for algo, results in sp.items():
+                data.exploit[algo] = [{**exploit(r.run, horizon), "seed": r.seed} for r in results]
+        pursuers: dict[str, list[str]] = {"oracle": ["oracle"]}
+        evaders: dict[str, list[str]] = {"random": ["random"], "flee": ["flee"]}
+        for algo, results in sp.items():
+            dirs = [str(r.run.run_dir) for r in sorted(results, key=lambda r: r.seed)]
+            if dirs:
+                pursuers[f"{algo.upper()} self-play"] = dirs
+                evaders[f"{algo.upper()} self-play evader"] = dirs
+        vs_random = data.runs("ours", "grid", "a2cm")
+        if vs_random:
+            pursuers["A2CM vs random (ours)"] = [
+                str(r.run.run_dir) for r in sorted(vs_random, key=lambda r: r.seed)
+            ]
+        if len(pursuers) > 1:
+            crossplay = cross_play("grid_vs", pursuers, evaders, args.crossplay_episodes, cache)
+    figures = _figures(data, out, groups, modes)
+    claims = paper_claims(data) + our_claims(data)
+    sessions_path = logdir / "report_sessions.json"
+    try:
+        sessions = json.loads(sessions_path.read_text()) if sessions_path.exists() else []
+    except (OSError, ValueError):
+        sessions = []
+    elapsed = time.perf_counter() - start
+    sessions.append({"command": meta["command"], "date": meta["date"], "elapsed_s": elapsed})
+    sessions_path.write_text(json.dumps(sessions, indent=1) + "\n")
+    meta = {
+        **meta,
+        "version": __version__,
+        "runs": sum(len(v) for v in by_cell.values()),
+        "elapsed": elapsed,
+        "total_wall": sum(s["elapsed_s"] for s in sessions),
+        "sessions": len(sessions),
+    }
+    (out / "RESULTS.md").write_text(report(data, claims, out, figures, crossplay, missing, meta))
+    rows = [
+        {
+            "group": r.run.cell.group,
+            "scenario": r.run.cell.scenario,
+            "algo": r.run.cell.algo,
+            "seed": r.seed,
+            "episodes": r.episodes,
+            "env_steps": r.env_steps,
+            "late_length": r.late_length,
+            "collisions_per_episode": r.collisions_per_episode,
+            "wall_time": r.wall_time,
+            "greedy": r.greedy,
+            "run_dir": str(r.run.run_dir),
+        }
+        for results in by_cell.values()
+        for r in results
+    ]
+    results = {
+        "meta": meta,
+        "claims": [c.__dict__ for c in claims],
+        "runs": rows,
+        "references": data.references,
+        "pursuit": {
+            k: {kk: vv for kk, vv in v.items() if kk != "lengths"} for k, v in data.pursuit.items()
+        },
+        "exploit": data.exploit,
+        "oracle_worst_case": data.oracle_worst_case,
+        "crossplay": crossplay,
+        "missing": [{"run": f"{r.cell.group}/{r.spec.name}", "why": w} for r, w in missing],
+    }
+    for ref in results["references"].values():
+        if ref:
+            ref.pop("lengths", None)
+    (out / "results.json").write_text(json.dumps(results, indent=1, default=str) + "\n")
+    return missing

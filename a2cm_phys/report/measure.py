@@ -1,0 +1,272 @@
+"""What each finished run of the report is worth, and the references beside it.
+
+Greedy evaluations, references and exact exploitability take seconds to minutes, so each
+is cached as JSON: a run's beside it (``report_eval.json``, ``report_exploit.json``), the
+references and the cross-play table in the log folder (``report_cache.json``), keyed by
+everything they depend on; re-running the report recomputes nothing that is there.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..config import ConfigError, Scenario, load_scenario
+from .plan import PlannedRun
+
+EVAL_SEED = 10_000
+"""Seed of the evaluation episodes (apart from every training seed)."""
+
+
+def _cached(path: Path, key: str, compute: Any) -> Any:
+    """``compute()`` unless ``path`` (a JSON object) holds ``key``; stores the result."""
+    data: dict[str, Any] = {}
+    if path.exists():
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, ValueError):
+            data = {}
+    if key in data:
+        return data[key]
+    value = compute()
+    data[key] = value
+    with contextlib.suppress(OSError):
+        path.write_text(json.dumps(data, indent=1) + "\n")
+    return value
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+@dataclass
+class RunResult:
+    """The figures of one finished run: training tallies and its greedy evaluation."""
+
+    run: PlannedRun
+    episodes: int
+    env_steps: int
+    late_length: float  # mean episode length over the last 10% of the run's env steps
+    late_return: float
+    collisions_per_episode: float  # in training
+    wall_time: float
+    greedy: dict[str, float] = field(default_factory=dict)
+    greedy_lengths: list[int] = field(default_factory=list)
+
+    @property
+    def seed(self) -> int:
+        """The run's seed."""
+        return self.run.spec.seed
+
+
+def training_figures(run_dir: Path) -> dict[str, float]:
+    """Episodes, env steps and the last 10% (by env steps) of a run's log."""
+    from ..plot import episode_env_steps
+    from ..record import read_run
+
+    log = read_run(run_dir)
+    steps = episode_env_steps(log)
+    lengths = np.asarray(log.episodes["length"], dtype=np.float64)
+    returns = np.asarray(log.episodes["return"], dtype=np.float64)
+    collisions = np.asarray(log.episodes["collisions"], dtype=np.float64)
+    late = steps >= 0.9 * steps.max() if len(steps) else np.zeros(0, dtype=bool)
+    return {
+        "episodes": len(lengths),
+        "env_steps": int(steps.max(initial=0)),
+        "late_length": float(lengths[late].mean()) if late.any() else float("nan"),
+        "late_return": float(returns[late].mean()) if late.any() else float("nan"),
+        "collisions_per_episode": float(collisions.mean()) if len(collisions) else float("nan"),
+    }
+
+
+def greedy_eval(run_dir: Path, episodes: int, scenario: Scenario | None = None) -> dict[str, Any]:
+    """The run's pursuers, greedy, over ``episodes`` seeded episodes (a learned evader's
+    scenario: against the random evader)."""
+    from ..evaluate import load_run, play
+    from ..policies import matchup
+
+    trained = load_run(run_dir)
+    game_scenario = scenario or trained.scenario
+    evader = "random" if game_scenario.evader == "learned" else None
+    game = matchup(game_scenario, str(run_dir), evader, greedy=True)
+    result = play(game.scenario, game.pursuers, episodes, seed=EVAL_SEED, evader=game.evader)
+    return _result_dict(result)
+
+
+def _result_dict(result: Any) -> dict[str, Any]:
+    captured = result.captured
+    return {
+        "length": float(result.lengths.mean()),
+        "capture_steps": _finite(result.lengths[captured].mean()) if captured.any() else None,
+        "capture_rate": float(captured.mean()),
+        "collisions": float(result.collisions.mean()),
+        "return": float(result.returns.mean()),
+        "lengths": result.lengths.astype(int).tolist(),
+    }
+
+
+def measure(run: PlannedRun, summary: dict[str, Any], eval_episodes: int) -> RunResult:
+    """Read a finished run's log and evaluate its final greedy policy (cached)."""
+    run_dir = run.run_dir
+    stamp = f"{summary.get('updates')}-{summary.get('episodes')}"
+    train = _cached(
+        run_dir / "report_eval.json", f"train-{stamp}", lambda: training_figures(run_dir)
+    )
+    greedy = _cached(
+        run_dir / "report_eval.json",
+        f"greedy-{stamp}-{eval_episodes}",
+        lambda: greedy_eval(run_dir, eval_episodes),
+    )
+    lengths = greedy.pop("lengths", [])
+    return RunResult(
+        run=run,
+        episodes=int(train["episodes"]),
+        env_steps=int(train["env_steps"]),
+        late_length=float(train["late_length"]),
+        late_return=float(train["late_return"]),
+        collisions_per_episode=float(train["collisions_per_episode"]),
+        wall_time=float(summary.get("wall_time_s", float("nan"))),
+        greedy={k: (float("nan") if v is None else v) for k, v in greedy.items()},
+        greedy_lengths=lengths,
+    )
+
+
+# --------------------------------------------------------------------------- references
+
+
+def reference(
+    scenario_name: str, overrides: dict[str, Any], episodes: int, cache: Path
+) -> dict[str, Any] | None:
+    """The reference of a scenario: the exact optimum on grids (``exact``), else the
+    oracle driven in physics (discrete control) or ``pursuit`` (continuous), played
+    greedy over ``episodes`` episodes with their figures; ``None`` if there is none."""
+    scenario = load_scenario(scenario_name, overrides)
+    key = json.dumps(["reference", scenario_name, overrides, episodes], sort_keys=True)
+
+    def compute() -> dict[str, Any] | None:
+        from ..evaluate import optimum, play
+        from ..policies import pursuer_policy
+
+        if scenario.mode == "grid":
+            best = optimum(scenario)
+            if best is None:
+                return None
+            return {"policy": "optimum (exact oracle)", "exact": True, **best,
+                    "length": best["capture_steps"]}  # fmt: skip
+        name = "pursuit" if scenario.continuous else "oracle"
+        try:
+            policy = pursuer_policy(name, scenario)
+        except ConfigError:
+            return None
+        result = play(scenario, policy, episodes, seed=EVAL_SEED)
+        return {"policy": f"{name} (played)", "exact": False, **_result_dict(result)}
+
+    return _cached(cache, key, compute)
+
+
+def extra_reference(
+    scenario_name: str, policy: str, overrides: dict[str, Any], episodes: int, cache: Path
+) -> dict[str, Any]:
+    """A named pursuer policy played greedy on a scenario (e.g. ``pursuit`` in physics)."""
+    scenario = load_scenario(scenario_name, overrides)
+    key = json.dumps(["policy", scenario_name, policy, overrides, episodes], sort_keys=True)
+
+    def compute() -> dict[str, Any]:
+        from ..evaluate import play
+        from ..policies import pursuer_policy
+
+        result = play(scenario, pursuer_policy(policy, scenario), episodes, seed=EVAL_SEED)
+        return {"policy": f"{policy} (played)", "exact": False, **_result_dict(result)}
+
+    return _cached(cache, key, compute)
+
+
+# --------------------------------------------------------------------------- self-play
+
+
+def exploit(run: PlannedRun, horizon: int | None) -> dict[str, Any]:
+    """Exact exploitability of a grid self-play run's final actors (cached): the evader's
+    best response to its pursuers (their worst-case capture time) and the pursuers' best
+    response to its evader, over ``horizon`` steps (``None``: the scenario's max_steps;
+    shorter is a truncated, lower value, ``truncated`` says so)."""
+    from ..evaluate import load_run
+    from ..exploitability import exploitability
+
+    trained = load_run(run.run_dir)
+    full = trained.scenario.max_steps
+    h = min(horizon or full, full)
+
+    def compute() -> dict[str, Any]:
+        start = time.perf_counter()
+        game = dataclasses.replace(trained.scenario, max_steps=h)
+        values = exploitability(game, trained.pursuers, trained.evader)
+        return {**values, "horizon": h, "truncated": h < full,
+                "seconds": time.perf_counter() - start}  # fmt: skip
+
+    return _cached(run.run_dir / "report_exploit.json", f"h{h}", compute)
+
+
+def oracle_worst_case(scenario_name: str, horizon: int | None, cache: Path) -> dict[str, Any]:
+    """The worst case of the oracle that is optimal against the random evader (exact)."""
+    scenario = load_scenario(scenario_name)
+    h = min(horizon or scenario.max_steps, scenario.max_steps)
+    key = json.dumps(["oracle-worst-case", scenario_name, h])
+
+    def compute() -> dict[str, Any]:
+        from ..policies import grid_twin
+        from ..solve.best_response import evader_best_response
+        from ..solve.sources import pursuer_source
+
+        twin = dataclasses.replace(grid_twin(scenario), max_steps=h)
+        table = pursuer_source(twin, "oracle").table
+        value = evader_best_response(twin, table).value_from_start
+        return {"exploit_worst_case": float(value), "horizon": h,
+                "truncated": h < scenario.max_steps}  # fmt: skip
+
+    return _cached(cache, key, compute)
+
+
+def cross_play(
+    scenario_name: str,
+    pursuers: dict[str, list[str]],
+    evaders: dict[str, list[str]],
+    episodes: int,
+    cache: Path,
+) -> list[dict[str, Any]]:
+    """Mean episode length (capped at max_steps) and capture rate of every pursuer group
+    against every evader group; groups are lists of run directories (seeds, paired by
+    index when both sides are learned) or one named policy. Sampled policies, as trained."""
+    from ..evaluate import play
+    from ..policies import matchup
+
+    scenario = load_scenario(scenario_name)
+    rows = []
+    for p_label, p_list in pursuers.items():
+        for e_label, e_list in evaders.items():
+            if len(p_list) > 1 and len(e_list) > 1:
+                pairs = list(zip(p_list, e_list, strict=False))
+            else:
+                pairs = [(p, e) for p in p_list for e in e_list]
+            key = json.dumps(["cross", scenario_name, pairs, episodes])
+
+            def compute(pairs: list[tuple[str, str]] = pairs) -> list[dict[str, float]]:
+                out = []
+                for p, e in pairs:
+                    game = matchup(scenario, p, e)
+                    r = play(game.scenario, game.pursuers, episodes, seed=EVAL_SEED,
+                             evader=game.evader)  # fmt: skip
+                    out.append({"length": float(r.lengths.mean()),
+                                "capture_rate": float(r.captured.mean())})  # fmt: skip
+                return out
+
+            results = _cached(cache, key, compute)
+            rows.append({"pursuers": p_label, "evader": e_label, "pairs": len(pairs),
+                         "results": results})  # fmt: skip
+    return rows
