@@ -222,6 +222,9 @@ class Train:
     collision_budget: float = 0.0
     lagrange_lr: float = 1.0
     exploit_every: int = 0  # grid self-play: exact exploitability every K updates (0: off)
+    pool_every: int = 0  # self-play: snapshot both teams every K updates (0: simultaneous)
+    pool_size: int = 10  # snapshots kept per team (oldest dropped), see a2cm_phys.opponents
+    pool_latest: float = 0.5  # probability that an update is latest against latest
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of the first impossible value."""
@@ -253,6 +256,12 @@ class Train:
         for key in ("collision_budget", "lagrange_lr", "collision_weight", "exploit_every"):
             if getattr(self, key) < 0:
                 raise _KeyError(key, f"must be >= 0, got {getattr(self, key)}")
+        if self.pool_every < 0:
+            raise _KeyError("pool_every", f"must be >= 0, got {self.pool_every}")
+        if self.pool_size < 1:
+            raise _KeyError("pool_size", f"must be >= 1, got {self.pool_size}")
+        if not 0.0 <= self.pool_latest <= 1.0:
+            raise _KeyError("pool_latest", f"must be in [0, 1], got {self.pool_latest}")
         if self.constrain_collisions and not (self.split_rewards and self.value_norm):
             raise _KeyError(
                 "constrain_collisions",
@@ -316,6 +325,7 @@ TRAIN_LIMITS: dict[str, tuple[int, str]] = {
     "workers": (256, "each worker is a process"),
     "seed": (2**64 - 1, "seeds feed 64-bit generators"),
     "lr": (1000, "a step size; far larger ones overflow the optimiser's float32 arithmetic"),
+    "pool_size": (10_000, "every snapshot's weights are held in memory and checkpointed"),
 }
 """Largest training values, with the reason."""
 

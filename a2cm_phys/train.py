@@ -47,6 +47,7 @@ from .cli import (
     writable_dir,
 )
 from .config import Scenario, Train, to_dict
+from .opponents import check_pool
 from .trainer import (
     EXIT_INTERRUPTED,
     EXIT_NONFINITE,
@@ -172,6 +173,7 @@ def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
     cfg = train_from_args(args, {k: getattr(args, k) for k in _TRAIN_FLAGS})
     check_seed(cfg)  # before the run directory exists
     check_workers(scenario, cfg)
+    check_pool(scenario, cfg)
     if args.run_dir:
         run_dir = Path(args.run_dir)
         check_new_run_dir(run_dir)

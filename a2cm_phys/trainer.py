@@ -41,6 +41,7 @@ from .config import (
 )
 from .envs.vector import VectorEnv
 from .exploitability import exploitability, solvable
+from .opponents import LATEST, PAIRING_CODES, OpponentPool, Pairing, check_pool
 from .rollout import StepHook, collect
 from .stats import EpisodeStats
 from .teams import make_teams
@@ -104,6 +105,7 @@ class Trainer:
     ) -> None:
         check_seed(cfg)
         check_workers(scenario, cfg)
+        check_pool(scenario, cfg)
         torch.set_num_threads(cfg.threads)
         self.scenario, self.cfg, self.run_dir = scenario, cfg, Path(run_dir)
         self.record, self.log_every, self.scene_every = record, log_every, scene_every
@@ -114,6 +116,12 @@ class Trainer:
         self.model, self.learner = self.pursuers.model, self.pursuers.learner
         self.batch = self.pursuers.batch
         self.rng = policy_rng(cfg.seed)
+        self.pool = (  # fictitious self-play (a2cm_phys.opponents); None: simultaneous
+            OpponentPool(self.model, self.evader.model, cfg.pool_size, cfg.pool_latest, cfg.seed)
+            if cfg.pool_every and self.evader is not None
+            else None
+        )
+        self.pairing: Pairing = LATEST
         self.stats = EpisodeStats()
         self.update = 0
         self.last_metrics: dict[str, float] = {}
@@ -137,6 +145,7 @@ class Trainer:
             "learner": self.learner.state_dict(),
             "evader_learner": None if self.evader is None else self.evader.learner.state_dict(),
             "rng": self.rng.bit_generator.state,
+            "pool": None if self.pool is None else self.pool.state_dict(),
             "env": self.env.state(),
             "stats": self.stats.state(),
             "wall_time": self.wall_time(),
@@ -148,6 +157,8 @@ class Trainer:
         if self.evader is not None:
             self.evader.learner.load_state_dict(state["evader_learner"])
         self.rng.bit_generator.state = state["rng"]
+        if self.pool is not None:
+            self.pool.load_state_dict(state["pool"])
         self.obs = self.env.load_state(state["env"])
         self.stats = EpisodeStats.from_state(state["stats"])
         self.update = self.saved_update = int(state["update"])
@@ -243,18 +254,33 @@ class Trainer:
 
     def _one_update(self, on_step: StepHook | None) -> None:
         # Snapshot so that an interrupt inside the rollout can rewind to the update boundary.
-        self._boundary = (self.env.state(), self.rng.bit_generator.state)
+        pool = self.pool
+        self._boundary = (
+            self.env.state(),
+            self.rng.bit_generator.state,
+            None if pool is None else pool.state_dict(),
+        )
         self._phase = _ROLLOUT
-        evader = None if self.evader is None else (self.evader.model.act, self.evader.batch)
+        self.pairing = pairing = LATEST if pool is None else pool.draw()
+        pursuers = self.model if pool is None else pool.player("pursuers", pairing)
+        evader = None
+        if self.evader is not None:
+            player = self.evader.model if pool is None else pool.player("evader", pairing)
+            evader = (player.act, self.evader.batch)
         obs, episodes = collect(
-            self.env, self.model.act, self.obs, self.rng, self.batch, on_step, evader
+            self.env, pursuers.act, self.obs, self.rng, self.batch, on_step, evader
         )
         self._phase = _LEARN
         progress = self.update / self.cfg.updates
-        self.last_metrics = self.learner.update(self.batch, progress)
-        if self.evader is not None:
+        self.last_metrics = {}
+        if pairing.learns("pursuers"):
+            self.last_metrics = self.learner.update(self.batch, progress)
+        if self.evader is not None and pairing.learns("evader"):
             evader_metrics = self.evader.learner.update(self.evader.batch, progress)
             self.last_metrics.update({f"evader_{k}": v for k, v in evader_metrics.items()})
+        if pool is not None:  # who played: see a2cm_phys.opponents.PAIRING_CODES
+            self.last_metrics["pool_pairing"] = PAIRING_CODES[pairing.kind]
+            self.last_metrics["pool_snapshot_update"] = pairing.taken_at
         every = self.cfg.exploit_every
         if every and (self.update + 1) % every == 0 and solvable(self.scenario):
             assert self.evader is not None
@@ -262,13 +288,15 @@ class Trainer:
         self.obs = obs
         self.stats.add(episodes)
         self.update += 1
+        if pool is not None and self.update % self.cfg.pool_every == 0:
+            pool.add(self.update)
         self._session_steps += self.cfg.batch_size
         self._phase = _IDLE
 
     def _state_at_last_update(self) -> dict[str, Any]:
         state = self.checkpoint_state()
         if self._phase == _ROLLOUT:
-            state["env"], state["rng"] = self._boundary
+            state["env"], state["rng"], state["pool"] = self._boundary
         return state
 
     def _maybe_save(self) -> None:
@@ -319,7 +347,12 @@ class Trainer:
             "mean_length_last_1000": s.recent_mean(0),
             "mean_return_last_1000": s.recent_mean(1),
             **(
-                {"evader_mean_return_last_1000": s.recent_mean(3)}
+                {
+                    "evader_mean_return_last_1000": s.recent_mean(3),
+                    "opponents": "simultaneous"
+                    if self.pool is None
+                    else self.pool.describe(cfg.pool_every),
+                }
                 if self.evader is not None
                 else {}
             ),
@@ -475,6 +508,7 @@ class _Progress:
                 len100=f"{s.recent_mean(0, 100):.2f}",
                 ret100=f"{s.recent_mean(1, 100):.4g}",
                 **({"evader_ret100": f"{s.recent_mean(3, 100):.4g}"} if t.evader else {}),
+                **({"opp": t.pairing.kind} if t.pool is not None else {}),
                 collisions=s.collisions,
                 steps_s=f"{t._session_steps / (now - t._session_start):.0f}",
                 refresh=False,

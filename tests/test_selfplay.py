@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from a2cm_phys import checkpoint
@@ -64,10 +65,16 @@ def test_one_run_trains_both_teams(tmp_path: Path) -> None:
     assert state["evader_learner"]["model"].keys() == trainer.evader.model.state_dict().keys()
 
 
-def test_self_play_resumes_bit_for_bit(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "opponents",
+    [(), ("--set", "train.pool_every=2", "train.pool_size=2")],
+    ids=["simultaneous", "pool"],
+)
+def test_self_play_resumes_bit_for_bit(tmp_path: Path, opponents: tuple[str, ...]) -> None:
     full_dir, part_dir = tmp_path / "a", tmp_path / "b"
-    assert main([*VS, *CONSTANT_LR, "--updates", "12", "--logdir", str(full_dir)]) == 0
-    assert main([*VS, *CONSTANT_LR, "--updates", "6", "--logdir", str(part_dir)]) == 0
+    args = [*VS, *CONSTANT_LR, *opponents]
+    assert main([*args, "--updates", "12", "--logdir", str(full_dir)]) == 0
+    assert main([*args, "--updates", "6", "--logdir", str(part_dir)]) == 0
     (full,) = full_dir.iterdir()
     (part,) = part_dir.iterdir()
     assert main(["--resume", str(part), "--updates", "12", "--no-progress"]) == 0
@@ -75,8 +82,18 @@ def test_self_play_resumes_bit_for_bit(tmp_path: Path) -> None:
     for team in ("learner", "evader_learner"):
         for key, value in a[team]["model"].items():
             assert torch.equal(value, b[team]["model"][key]), (team, key)
+    assert a["rng"] == b["rng"]
+    if opponents:  # the pool: same draws, same snapshots (the newest two: updates 10 and 12)
+        assert a["pool"]["rng"] == b["pool"]["rng"] and a["pool"]["counts"] == b["pool"]["counts"]
+        for side in ("pursuers", "evader"):
+            pa, pb = a["pool"]["snapshots"][side], b["pool"]["snapshots"][side]
+            assert [s["update"] for s in pa] == [s["update"] for s in pb] == [10, 12]
+            for x, y in zip(pa, pb, strict=True):
+                assert all(torch.equal(v, y["weights"][k]) for k, v in x["weights"].items())
+    else:
+        assert a["pool"] is None
     sa, sb = (json.loads((p / "summary.json").read_text()) for p in (full, part))
-    for key in ("episodes", "mean_length_last_1000", "evader_mean_return_last_1000"):
+    for key in ("episodes", "mean_length_last_1000", "evader_mean_return_last_1000", "opponents"):
         assert sa[key] == sb[key]
 
 
