@@ -217,7 +217,13 @@ class Train:
     balance_rewards: bool = True  # each component's advantage on its own scale
     collision_weight: float = 1.0
     lr_schedule: Schedule = "linear"  # ours; the paper's is constant
-    log_std_init: float = 0.0  # continuous control: initial log-std of the Gaussians
+    # Continuous control (ours; None: the value for the scenario's control type, see
+    # resolve_train): the Gaussians' initial log-std, a soft bound keeping their means
+    # inside the command box (algos/learner.py), and progress shaping on the pursuers'
+    # distance to the evader (algos/shaping.py).
+    log_std_init: float | None = None
+    mean_bound_coef: float | None = None
+    distance_shaping: float | None = None
     constrain_collisions: bool = False  # collisions as a constraint (Lagrange multiplier)
     collision_budget: float = 0.0
     lagrange_lr: float = 1.0
@@ -256,6 +262,12 @@ class Train:
         for key in ("collision_budget", "lagrange_lr", "collision_weight", "exploit_every"):
             if getattr(self, key) < 0:
                 raise _KeyError(key, f"must be >= 0, got {getattr(self, key)}")
+        for key in ("distance_shaping", "mean_bound_coef"):
+            value = getattr(self, key)
+            if value is not None and not 0.0 <= value < float("inf"):
+                raise _KeyError(key, f"must be finite and >= 0, got {value}")
+        if self.log_std_init is not None and not math.isfinite(self.log_std_init):
+            raise _KeyError("log_std_init", f"must be finite, got {self.log_std_init}")
         if self.pool_every < 0:
             raise _KeyError("pool_every", f"must be >= 0, got {self.pool_every}")
         if self.pool_size < 1:
@@ -296,6 +308,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "split_rewards": False,
         "lr_schedule": "constant",
         "constrain_collisions": False,
+        "distance_shaping": 0.0,
     },
 }
 """Named sets of :class:`Train` values (``--preset NAME``). ``paper`` is the paper's exact
@@ -524,3 +537,29 @@ def load_train(
 ) -> Train:
     """A validated :class:`Train` from the defaults and ``overrides``."""
     return build(Train, dict(overrides or {}), source)
+
+
+CONTROL_DEFAULTS: dict[str, dict[str, float]] = {
+    "continuous": {"log_std_init": -0.5, "mean_bound_coef": 0.1, "distance_shaping": 1.0},
+    "discrete": {"log_std_init": 0.0, "mean_bound_coef": 0.0, "distance_shaping": 0.0},
+}
+"""The values :func:`resolve_train` gives unset :class:`Train` keys, per control type. In
+continuous control a −1 step reward at 10 Hz alone is not learned and unbounded Gaussian
+means run away (``BENCHMARKS.md``); discrete control keeps the paper's rewards (and these
+keys were added after runs whose stored configs lack them: they mean the discrete values)."""
+
+
+def resolve_train(scenario: Scenario, cfg: Train) -> Train:
+    """``cfg`` with its unset (None) keys given the values of ``scenario``'s control type
+    (:data:`CONTROL_DEFAULTS`): what a run records and its learner sees."""
+    values = CONTROL_DEFAULTS["continuous" if scenario.continuous else "discrete"]
+    unset = {k: v for k, v in values.items() if getattr(cfg, k) is None}
+    return dataclasses.replace(cfg, **unset) if unset else cfg
+
+
+def stored_train(values: Mapping[str, Any]) -> dict[str, Any]:
+    """A stored run's training config completed for keys added after it was written:
+    the discrete values of :data:`CONTROL_DEFAULTS` (such runs had none of these pieces),
+    then today's defaults."""
+    added = {f.name: f.default for f in dataclasses.fields(Train)}
+    return {**added, **CONTROL_DEFAULTS["discrete"], **values}

@@ -28,7 +28,7 @@ import numpy as np
 from . import checkpoint
 from .algos import ActorCritic, make_model
 from .cli import SEED, Parser, add_scenario_options, int_range, run_cli, scenario_from_args
-from .config import ConfigError, Scenario, build, load_train
+from .config import ConfigError, Scenario, build, load_train, stored_train
 from .envs.vector import VectorEnv
 from .policies import (
     BEST_RESPONSE,
@@ -135,7 +135,7 @@ def load_run(path: str | Path) -> TrainedRun:
     except (OSError, ValueError) as err:
         raise ConfigError(str(err)) from None
     scenario = build(Scenario, state["scenario"], f"{path} (checkpoint)")
-    cfg = load_train({**state["train"], "device": "cpu"}, f"{path} (checkpoint)")
+    cfg = load_train({**stored_train(state["train"]), "device": "cpu"}, f"{path} (checkpoint)")
     pursuers = make_model(cfg, scenario)
     pursuers.load_state_dict(state["learner"]["model"])
     evader = None

@@ -42,7 +42,16 @@ from .cli import (
     train_values,
     writable_dir,
 )
-from .config import ConfigError, Scenario, Train, load_scenario, load_train, to_dict
+from .config import (
+    ConfigError,
+    Scenario,
+    Train,
+    load_scenario,
+    load_train,
+    resolve_train,
+    stored_train,
+    to_dict,
+)
 from .stats import t_interval
 
 
@@ -66,7 +75,8 @@ class RunSpec:
     def resolve(self) -> tuple[Scenario, Train]:
         """The validated scenario and training config of this run."""
         scenario = load_scenario(self.scenario, self.overrides)
-        return scenario, load_train({**self.train, "algo": self.algo, "seed": self.seed})
+        cfg = load_train({**self.train, "algo": self.algo, "seed": self.seed})
+        return scenario, resolve_train(scenario, cfg)
 
     def command(self, run_dir: Path) -> str:
         """The equivalent ``train`` command line (for the record)."""
@@ -141,6 +151,7 @@ def check_reusable(spec: RunSpec, sweep_dir: Path) -> None:
     if stored is None:
         return
     scenario, cfg = spec.resolve()
+    stored = {**stored, "train": stored_train(stored["train"])}
     diff = differences(stored, {"scenario": _plain(scenario), "train": _plain(cfg)})
     if diff:
         shown = "; ".join(diff[:3]) + (f"; and {len(diff) - 3} more" if len(diff) > 3 else "")

@@ -16,7 +16,8 @@ import numpy as np
 import torch
 
 from .algos import ActorCritic, Learner, make_model
-from .config import Scenario, Train
+from .algos.shaping import DistanceShaping
+from .config import Scenario, Train, resolve_train
 from .rollout import allocate_batch, allocate_evader_batch
 
 
@@ -46,6 +47,7 @@ def _evader_generator(seed: int) -> torch.Generator:
 
 def make_teams(scenario: Scenario, cfg: Train) -> tuple[Team, Team | None]:
     """The pursuers' team and, if the scenario's evader is learned, the evader's."""
+    cfg = resolve_train(scenario, cfg)
     model = make_model(cfg, scenario)
     batch = allocate_batch(
         cfg.steps_per_env,
@@ -55,10 +57,18 @@ def make_teams(scenario: Scenario, cfg: Train) -> tuple[Team, Team | None]:
         model.dist.action_shape,
         model.dist.action_dtype,
     )
-    pursuers = Team("pursuers", model, Learner(model, cfg), batch)
+    pursuers = Team("pursuers", model, Learner(model, cfg, _shaping(scenario, cfg)), batch)
     if scenario.evader != "learned":
         return pursuers, None
     ecfg = evader_train_cfg(cfg)
     emodel = make_model(ecfg, scenario, _evader_generator(cfg.seed), n_agents=1)
     ebatch = allocate_evader_batch(batch, emodel.dist.action_shape, emodel.dist.action_dtype)
-    return pursuers, Team("evader", emodel, Learner(emodel, ecfg), ebatch)
+    learner = Learner(emodel, ecfg, _shaping(scenario, ecfg, sign=-1.0))
+    return pursuers, Team("evader", emodel, learner, ebatch)
+
+
+def _shaping(scenario: Scenario, cfg: Train, sign: float = 1.0) -> DistanceShaping | None:
+    """The learner's distance shaping, if ``distance_shaping`` is on."""
+    if not cfg.distance_shaping:  # 0, or None (not resolved for a scenario: off)
+        return None
+    return DistanceShaping(scenario, cfg.distance_shaping, sign)

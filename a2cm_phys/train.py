@@ -46,7 +46,7 @@ from .cli import (
     train_from_args,
     writable_dir,
 )
-from .config import Scenario, Train, to_dict
+from .config import Scenario, Train, resolve_train, to_dict
 from .opponents import check_pool
 from .trainer import (
     EXIT_INTERRUPTED,
@@ -196,7 +196,7 @@ def write_config(run_dir: Path, scenario: Scenario, cfg: Train, command: str) ->
     """Write ``config.json``: the resolved scenario and training config, and the command."""
     config = {
         "scenario": to_dict(scenario),
-        "train": to_dict(cfg),
+        "train": to_dict(resolve_train(scenario, cfg)),
         "command": command,
         "created": datetime.now().isoformat(timespec="seconds"),
     }

@@ -37,6 +37,8 @@ from .config import (
     Train,
     build,
     load_train,
+    resolve_train,
+    stored_train,
     to_dict,
 )
 from .envs.vector import VectorEnv
@@ -103,6 +105,7 @@ class Trainer:
         checkpoint_seconds: float = 30.0,
         checkpoint_every: int = 0,
     ) -> None:
+        cfg = resolve_train(scenario, cfg)
         check_seed(cfg)
         check_workers(scenario, cfg)
         check_pool(scenario, cfg)
@@ -176,7 +179,7 @@ class Trainer:
         if run_dir.is_file():  # the checkpoint itself was given
             run_dir = run_dir.parent
         scenario = build(Scenario, state["scenario"], f"{run_dir} (checkpoint)")
-        train = dict(state["train"])
+        train = stored_train(state["train"])  # written before some options existed?
         if updates is not None:
             train["updates"] = updates
         cfg = load_train(train, f"{run_dir} (checkpoint)")

@@ -457,3 +457,25 @@ def test_non_finite_rewards_change_nothing_under_our_settings() -> None:
     assert all(torch.equal(p, q) for p, q in zip(before, m.parameters(), strict=True))
     after = learner.value_norm.state_dict()
     assert all(torch.equal(norm[k], after[k]) for k in norm)
+
+
+def test_mean_bound_loss_by_hand():
+    from a2cm_phys.algos.learner import MEAN_BOUND, mean_bound_loss
+
+    b = MEAN_BOUND
+    means = torch.tensor([[[[0.5, b + 0.2]], [[-b - 0.5, 0.0]]]])  # (T=1, B=2, N=1, dim=2)
+    # per agent: the batch mean of the per-dimension squared overshoots, summed
+    expected = ((0.2**2) + (0.5**2)) / 2
+    assert mean_bound_loss(means).item() == pytest.approx(expected, rel=1e-5)
+    assert mean_bound_loss(torch.zeros(3, 2, 4, 2)).item() == 0.0
+
+
+def test_mean_bound_pulls_runaway_gaussian_means_back():
+    """With no advantage signal, the bound alone moves means beyond it back towards ±1.1,
+    and leaves means inside it untouched."""
+    from a2cm_phys.algos.learner import mean_bound_loss
+
+    out = torch.tensor([[[[3.0, 0.5]]]], requires_grad=True)
+    mean_bound_loss(out).backward()
+    assert out.grad[0, 0, 0, 0] > 0  # descent lowers the runaway mean
+    assert out.grad[0, 0, 0, 1] == 0

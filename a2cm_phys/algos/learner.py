@@ -21,18 +21,21 @@ one per agent: the only difference). An update is a sequence of small pieces:
    · (collisions per step − budget)`` after each batch): it starts at 0, so the team first
    learns to catch, and rises only as long as collisions happen;
 4. **loss** ``Σ_i [−mean(A_i · log π_i(a_i|s)) − entropy_coef · H(π_i)] + value_coef ·
-   Σ_c MSE_c`` (critics regress their normalised targets) and one optimiser step (RMSprop
-   as Keras has it, the paper's, or Adam), with optional gradient clipping.
+   Σ_c MSE_c`` (critics regress their normalised targets), plus for Gaussian actors
+   ``mean_bound_coef`` times a soft bound on their means (:func:`mean_bound_loss`), and one
+   optimiser step (RMSprop as Keras has it, the paper's, or Adam), with optional gradient
+   clipping.
 
-Rewards arrive raw (the team reward, or its components ``reward_parts``) and are multiplied
-by ``reward_scale`` here: what the learner sees is documented in the run's config.
+Rewards arrive raw (the team reward, or its components ``reward_parts``), get an optional
+shaping term (:mod:`~a2cm_phys.algos.shaping`) and are multiplied by ``reward_scale`` here:
+what the learner sees is documented in the run's config.
 """
 
 from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -48,6 +51,25 @@ if TYPE_CHECKING:
 BATCH_KEYS = ("obs", "actions", "rewards", "terminated", "truncated", "final_obs", "next_obs")
 """Keys :meth:`Learner.update` reads from a batch (all time-major except ``next_obs``); a
 batch may add ``reward_parts (T, B, K)``, the reward's components, for ``split_rewards``."""
+
+
+MEAN_BOUND = 1.1
+"""Where the soft bound on Gaussian means starts: a little past the command box's ±1, so a
+mean can still command full speed along an axis."""
+
+
+def mean_bound_loss(means: torch.Tensor) -> torch.Tensor:
+    """``Σ_agents,dims mean_batch [relu(μ − b)² + relu(−μ − b)²]`` with ``b = MEAN_BOUND``.
+
+    A Gaussian actor's unbounded mean drifts past the env's clip under the optimiser's
+    noise; there every sample is clipped to the same command and the gradient carries no
+    information about the game (measured: against a static evader the means ran to −25 and
+    the team never captured). This soft bound (rl_games' ``bounds_loss``) pulls them back
+    without squashing, so log-probabilities stay those of the plain Gaussian.
+    ``means``: ``(T, B, N, dim)``.
+    """
+    over = (means - MEAN_BOUND).clamp(min=0) ** 2 + (means + MEAN_BOUND).clamp(max=0) ** 2
+    return over.mean(dim=(0, 1)).sum()
 
 
 class NonFiniteLoss(FloatingPointError):
@@ -81,11 +103,20 @@ class Learner:
         train_cfg: ``lr``, ``optimizer`` and its constants, ``gamma``, ``gae_lambda``,
             ``entropy_coef``, ``value_coef``, ``reward_scale``, ``max_grad_norm``,
             ``normalize_advantages``, ``value_norm``, ``split_rewards``.
+        shaping: optional shaping term ``shaping(batch) -> (T, B)`` added to the (first)
+            reward component before scaling, e.g.
+            :class:`~a2cm_phys.algos.shaping.DistanceShaping`.
     """
 
-    def __init__(self, model: ActorCritic, train_cfg: Train) -> None:
+    def __init__(
+        self,
+        model: ActorCritic,
+        train_cfg: Train,
+        shaping: Callable[[Mapping[str, Any]], np.ndarray] | None = None,
+    ) -> None:
         self.model = model
         self.cfg = train_cfg
+        self.shaping = shaping
         self.optimizer = make_optimizer(model, train_cfg)
         self.device = next(model.parameters()).device
         self.value_norm = (
@@ -173,6 +204,8 @@ class Learner:
         entropy_sum = entropy.mean(dim=(0, 1)).sum()
         value_loss = (targets - out).pow(2).mean(dim=(0, 1)).sum()
         loss = policy_loss - cfg.entropy_coef * entropy_sum + cfg.value_coef * value_loss
+        if model.log_std is not None and cfg.mean_bound_coef:  # None (unresolved): off
+            loss = loss + cfg.mean_bound_coef * mean_bound_loss(dist_out)
 
         p_loss, v_loss, ent, total = torch.stack(
             [policy_loss, value_loss, entropy_sum, loss]
@@ -225,6 +258,9 @@ class Learner:
                 )
         else:
             parts = np.asarray(batch["rewards"], dtype=np.float64)[..., None]
+        if self.shaping is not None:  # added to the time component (a new array: the
+            parts = parts.copy()  # batch's own rewards stay raw)
+            parts[..., 0] += self.shaping(batch)
         return parts * self.cfg.reward_scale
 
     def _critic(self, obs: torch.Tensor) -> torch.Tensor:

@@ -279,6 +279,7 @@ def make_model(
     (independent of the global torch RNG). With ``split_rewards`` each critic predicts one
     value per reward component (:data:`~a2cm_phys.rollout.REWARD_PARTS`).
     """
+    from a2cm_phys.config import resolve_train
     from a2cm_phys.rollout import REWARD_PARTS
 
     if generator is None:
@@ -290,7 +291,7 @@ def make_model(
         train_cfg.hidden,
         shared_critic=train_cfg.algo == "a2cm" if shared_critic is None else shared_critic,
         n_values=len(REWARD_PARTS) if train_cfg.split_rewards else 1,
-        log_std_init=train_cfg.log_std_init,
+        log_std_init=resolve_train(scenario, train_cfg).log_std_init,
         generator=generator,
     )
     return model.to(train_cfg.device)
