@@ -66,12 +66,18 @@ def experiment_tables(data: Data, group: str, out: Path, figures: dict[str, Path
                     f"{_ci([r.wall_time for r in runs])} | {paper_time:,.0f} | "
                     f"{links(runs, out)} |"
                 )
-        for kind in ("lengths", "returns"):
-            path = figures.get(f"{group}/{mode}/{kind}")
-            if path:
-                rel = Path(os.path.relpath(path.resolve(), out.resolve())).as_posix()
-                lines += ["", f"![{group} {mode} {kind}]({rel})"]
-        lines.append("")
+        lines += [*figure_lines(figures, f"{group}/{mode}", f"{group} {mode}", out), ""]
+    return lines
+
+
+def figure_lines(figures: dict[str, Path], key: str, title: str, out: Path) -> list[str]:
+    """Markdown images of the lengths and returns figures of ``key``, linked from ``out``."""
+    lines = []
+    for kind in ("lengths", "returns"):
+        path = figures.get(f"{key}/{kind}")
+        if path:
+            rel = Path(os.path.relpath(path.resolve(), out.resolve())).as_posix()
+            lines += ["", f"![{title} {kind}]({rel})"]
     return lines
 
 
@@ -143,11 +149,7 @@ def continuous_section(data: Data, out: Path, figures: dict[str, Path]) -> list[
                 f"{_ci([r.late_length for r in runs])} | {_ci([r.wall_time for r in runs])} | "
                 f"{links(runs, out)} |"
             )
-    for kind in ("lengths", "returns"):
-        path = figures.get(f"continuous/physics/{kind}")
-        if path:
-            rel = Path(os.path.relpath(path.resolve(), out.resolve())).as_posix()
-            lines += ["", f"![continuous {kind}]({rel})"]
+    lines += figure_lines(figures, "continuous/physics", "continuous", out)
     return [*lines, ""]
 
 
