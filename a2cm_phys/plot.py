@@ -329,6 +329,8 @@ def plot_aggregate(
             if relative:
                 rows = rows / panel.reference.ret
             mean, lo, hi = seed_band(rows)
+            if column == "length":  # a t band of skewed lengths can dip below one step
+                lo = np.maximum(lo, 1.0)
             drawn.append(mean)
             shown = np.isfinite(mean)  # bins where no episode ended are skipped, not gaps
             ax.plot(
