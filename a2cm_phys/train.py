@@ -171,6 +171,7 @@ def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
         raise UsageError("--scenario is required (or --resume RUN_DIR)")
     scenario = scenario_from_args(args)
     cfg = train_from_args(args, {k: getattr(args, k) for k in _TRAIN_FLAGS})
+    cfg = resolve_train(scenario, cfg)  # what config.json records and the learner sees
     check_seed(cfg)  # before the run directory exists
     check_workers(scenario, cfg)
     check_pool(scenario, cfg)
@@ -196,7 +197,7 @@ def write_config(run_dir: Path, scenario: Scenario, cfg: Train, command: str) ->
     """Write ``config.json``: the resolved scenario and training config, and the command."""
     config = {
         "scenario": to_dict(scenario),
-        "train": to_dict(resolve_train(scenario, cfg)),
+        "train": to_dict(cfg),
         "command": command,
         "created": datetime.now().isoformat(timespec="seconds"),
     }
