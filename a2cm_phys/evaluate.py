@@ -1,7 +1,7 @@
 """Play pursuers against an evader and report: ``python -m a2cm_phys.evaluate RUN --greedy``.
 
 The pursuers and the evader are chosen apart, each a run directory or a named policy
-(``--pursuers random|pursuit|oracle|RUN``, ``--evader random|flee|static|RUN``; see
+(``--pursuers random|pursuit|oracle|minimax|RUN``, ``--evader random|flee|static|RUN``; see
 :mod:`a2cm_phys.policies`). The report gives the mean, median and 95th percentile of the
 capture steps, the capture rate, the collisions per episode and the return under the
 scenario's raw reward, each with a seeded bootstrap 95% confidence interval, and beside

@@ -60,6 +60,7 @@ from .solve.best_response import (
     pursuers_best_response,
 )
 from .solve.evaluate import CaptureDistribution, PolicyChain
+from .solve.minimax import MinimaxBounds
 from .solve.pursuer_step import check_size
 from .solve.sources import (
     PURSUER_NAMES,
@@ -399,6 +400,21 @@ def _pursuers_report(sc: Scenario, label: str, br: BestResponse) -> str:
     return "\n".join(lines)
 
 
+def _bounds_report(bounds: MinimaxBounds) -> str:
+    """The bounds on the game's minimax value that come with the minimax team."""
+    k_lo, k_hi = bounds.iterations
+    return "\n".join(
+        [
+            "  the game's minimax capture time (both teams at their best, mixed strategies),"
+            " from the start:",
+            f"    at least {bounds.lower_from_start:g} (the evader moving first,"
+            f" {k_lo} steps of recursion): no team's worst case is lower",
+            f"    at most {bounds.upper_from_start:g} (the pursuers moving first,"
+            f" {k_hi} steps): the minimax team's worst case; {bounds.seconds:.1f} s",
+        ]
+    )
+
+
 def _best_response_scenario(args) -> Scenario:
     """``--scenario`` with ``--set``; without ``--scenario``, a run directory's own."""
     names = PURSUER_NAMES if args.best_response == "evader" else SCRIPTED_EVADERS
@@ -420,11 +436,14 @@ def _best_response(args) -> int:
         sc = _best_response_scenario(args)
         if args.best_response == "evader":
             spec = args.pursuers or "oracle"
-            check_size(sc, {"oracle": "deterministic", "random": "product"}.get(spec, "general"))
+            kinds = {"oracle": "deterministic", "minimax": "deterministic", "random": "product"}
+            check_size(sc, kinds.get(spec, "general"))
             source = pursuer_source(sc, spec, **cache)
             br = evader_best_response(sc, source.table, args.tol)
             random = evaluate_tables(sc, source.table, uniform_table(sc, 1), args.tol)
             print(_evader_report(sc, source.label, br, random))
+            if isinstance(source.solution, MinimaxBounds):
+                print(_bounds_report(source.solution))
             return 0
         spec = args.evader or sc.evader
         if spec not in SCRIPTED_EVADERS and spec == sc.evader:
@@ -459,8 +478,9 @@ def _main(argv: Sequence[str]) -> int:
     )
     parser.add_argument(
         "--pursuers",
-        metavar="random|oracle|RUN_DIR",
-        help="with --best-response evader: the pursuers' policy (default oracle)",
+        metavar="random|oracle|minimax|RUN_DIR",
+        help="with --best-response evader: the pursuers' policy (default oracle; minimax:"
+        " the team optimal when the evader sees its move, with bounds on the game's value)",
     )
     parser.add_argument(
         "--evader",

@@ -6,6 +6,9 @@
   mode the grid oracle driven in the physics arena: each body's centre is mapped to the
   cell it lies in, and the oracle's move becomes the velocity command in that direction.
   Against a learned evader it is the oracle that is optimal against the random evader.
+- ``minimax``: the grid's minimax team (:mod:`a2cm_phys.solve.minimax`): deterministic,
+  optimal when the evader sees its move, so no evader escapes it longer than the bound
+  (grid mode only).
 
 Each is a :data:`~a2cm_phys.rollout.Policy`: ``policy(obs (B, obs_dim), rng) -> actions``.
 
@@ -28,7 +31,7 @@ from .config import ConfigError, Physics, Scenario
 from .envs.core import ACTION_DELTAS
 from .rollout import Policy
 
-PURSUER_POLICIES = ("random", "pursuit", "oracle")
+PURSUER_POLICIES = ("random", "pursuit", "oracle", "minimax")
 """The names :func:`pursuer_policy` knows."""
 
 
@@ -95,9 +98,34 @@ def oracle_policy(scenario: Scenario) -> Policy:
     return act
 
 
+def minimax_policy(scenario: Scenario) -> Policy:
+    """The minimax team of a grid scenario (of its twin against the random evader where the
+    evader is learned; the team does not depend on the evader). Raises
+    :class:`~a2cm_phys.config.ConfigError` outside grid mode or where it cannot be solved.
+    """
+    from .solve import TooLargeError, UnsupportedError
+    from .solve.minimax import minimax_bounds
+    from .solve.tables import TablePolicy, joint_policy_table
+
+    if scenario.mode != "grid":
+        raise ConfigError("minimax policy: the minimax team is solved on grids only")
+    twin = grid_twin(scenario)
+    try:
+        bounds = minimax_bounds(twin)
+    except (TooLargeError, UnsupportedError) as err:
+        raise ConfigError(f"minimax policy: {err}") from None
+    team = TablePolicy(twin, joint_policy_table(twin, bounds.policy))
+    return lambda obs, rng: team.act(obs, rng, greedy=True)
+
+
 def pursuer_policy(name: str, scenario: Scenario) -> Policy:
     """The named pursuer policy for ``scenario`` (one of :data:`PURSUER_POLICIES`)."""
-    makers = {"random": random_policy, "pursuit": pursuit_policy, "oracle": oracle_policy}
+    makers = {
+        "random": random_policy,
+        "pursuit": pursuit_policy,
+        "oracle": oracle_policy,
+        "minimax": minimax_policy,
+    }
     if name not in makers:
         raise ConfigError(f"unknown pursuer policy {name!r} (known: {', '.join(makers)})")
     return makers[name](scenario)
@@ -160,8 +188,8 @@ def matchup(
 
 
 def best_response_evader(scenario: Scenario, pursuers: str):
-    """The evader's exact best response to ``pursuers`` (a run directory, ``random`` or
-    ``oracle``), as a table policy with the actors' interface (grid scenarios only)."""
+    """The evader's exact best response to ``pursuers`` (a run directory, ``random``,
+    ``oracle`` or ``minimax``), as a table policy with the actors' interface (grids only)."""
     from .solve import TooLargeError, UnsupportedError
     from .solve.best_response import evader_best_response
     from .solve.sources import SourceError, pursuer_source

@@ -41,6 +41,12 @@ PIECES: dict[str, dict[str, Any]] = {
     "lr2e-2": {"lr": 2e-2},
     "beta.99": {"value_norm_beta": 0.99},
     "cw3": {"collision_weight": 3.0},
+    "cw.7": {"collision_weight": 0.7},
+    "cw.6": {"collision_weight": 0.6},
+    "cw.5": {"collision_weight": 0.5},
+    "cw.3": {"collision_weight": 0.3},
+    "ent0": {"entropy_coef": 0.0},
+    "shape": {"distance_shaping": 1.0},
     "lagrange": {"value_norm": True, "split_rewards": True, "constrain_collisions": True},
     "lagrange10": {
         "value_norm": True,
@@ -53,14 +59,15 @@ PIECES: dict[str, dict[str, Any]] = {
 
 
 def variant_options(name: str) -> dict[str, Any]:
-    """Training options of a variant: ``ours`` (the defaults), ``paper16`` (the paper's
-    method with 16 games) or ``paper16`` plus ``+``-separated :data:`PIECES`."""
+    """Training options of a variant: ``ours`` (the defaults) or ``paper16`` (the paper's
+    method with 16 games), either plus ``+``-separated :data:`PIECES` (``ours+cw.5``)."""
     from a2cm_phys.config import preset
 
-    if name == "ours":
-        return {}
-    options = {**preset("paper"), "num_envs": 16}
-    for piece in name.removeprefix("paper16").split("+")[1:]:
+    base, *pieces = name.split("+")  # "+advnorm" is short for "paper16+advnorm"
+    if base not in ("ours", "paper16", ""):
+        raise ValueError(f"variant {name!r}: start with 'ours' or 'paper16'")
+    options = {} if base == "ours" else {**preset("paper"), "num_envs": 16}
+    for piece in pieces:
         if piece not in PIECES:
             raise ValueError(f"unknown piece {piece!r} in {name!r} (pieces: {', '.join(PIECES)})")
         options.update(PIECES[piece])

@@ -445,3 +445,97 @@ def test_cli_with_a_trained_run(tmp_path: Path, capsys: pytest.CaptureFixture[st
         main(["--scenario", "grid", "--best-response", "evader", "--pursuers", str(tmp_path)]) == 2
     )
     assert "trained on grid 3x3" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- minimax bounds
+
+
+def brute_bounds(b: Brute, horizon: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(V_lo, V_hi)`` of the evader-first and pursuers-first games, by loops over states."""
+    lo, hi = np.zeros(len(b.states)), np.zeros(len(b.states))
+    for _ in range(horizon):
+        new_lo, new_hi = np.zeros_like(lo), np.zeros_like(hi)
+        joint, moves = range(len(b.joint)), range(b.next.shape[2])
+        for k in np.flatnonzero(b.valid):
+
+            def steps(v: np.ndarray, j: int, m: int, k: int = k) -> float:
+                return 1.0 if b.capture[k, j, m] else 1.0 + v[b.next[k, j, m]]
+
+            new_hi[k] = min(max(steps(hi, j, m) for m in moves) for j in joint)
+            new_lo[k] = max(min(steps(lo, j, m) for j in joint) for m in moves)
+        lo, hi = new_lo, new_hi
+    return lo, hi
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {"size": 2, "pursuers": 2, "max_steps": 20},
+        {"size": 3, "pursuers": 1, "max_steps": 12},  # one pursuer: the evader can run for ever
+        {"size": 3, "pursuers": 2, "max_steps": 30, "collisions__mode": "penalize"},
+    ],
+)
+def test_minimax_bounds_match_brute_force(overrides: dict) -> None:
+    from a2cm_phys.solve.minimax import minimax_bounds
+
+    sc = grid(**overrides)
+    bounds = minimax_bounds(sc)
+    lo, hi = brute_bounds(Brute(sc, sc.actions), sc.max_steps)
+    np.testing.assert_array_equal(bounds.lower, lo)
+    np.testing.assert_array_equal(bounds.upper, hi)
+    assert np.all(bounds.lower <= bounds.upper)
+
+
+def test_minimax_team_is_escaped_exactly_as_long_as_the_upper_bound() -> None:
+    from a2cm_phys.solve.minimax import minimax_bounds
+
+    sc = grid(size=3, pursuers=2, max_steps=30)
+    bounds = minimax_bounds(sc)
+    team = joint_policy_table(sc, bounds.policy)
+    br = evader_best_response(sc, team)
+    valid = valid_states(sc)
+    np.testing.assert_allclose(br.values[valid], bounds.upper[valid], atol=1e-9)
+    assert np.any(bounds.lower < bounds.upper)  # moving first costs a team something
+    # No team, however it randomises, is escaped for less than the lower bound.
+    oracle = joint_policy_table(sc, load_or_solve(sc, use_cache=False).policy)
+    for table in (team, oracle, uniform_table(sc, 2)):
+        worst = evader_best_response(sc, table).values
+        assert np.all(worst[valid] >= bounds.lower[valid] - 1e-9)
+
+
+def test_minimax_refuses_games_it_cannot_bound() -> None:
+    from a2cm_phys.solve import UnsupportedError
+    from a2cm_phys.solve.minimax import minimax_bounds
+
+    with pytest.raises(UnsupportedError, match="collisions end the episode"):
+        minimax_bounds(grid(size=3, pursuers=2, collisions__mode="terminate"))
+    with pytest.raises(UnsupportedError, match="grids only"):
+        minimax_bounds(load_scenario("phys"))
+
+
+def test_cli_minimax_team_prints_the_bounds(capsys: pytest.CaptureFixture[str]) -> None:
+    from a2cm_phys.solve.minimax import minimax_bounds
+
+    bounds = minimax_bounds(grid(size=3, pursuers=2, max_steps=50))
+    argv = [*SMALL, "--best-response", "evader", "--pursuers", "minimax"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert f"worst-case capture time: {bounds.upper_from_start:.6f}" in out
+    assert f"at least {bounds.lower_from_start:g}" in out
+    assert f"at most {bounds.upper_from_start:g}" in out
+    assert main([*argv, "--set", "collisions.mode=terminate"]) == 2
+    assert "collisions end the episode" in capsys.readouterr().err
+
+
+def test_minimax_team_is_escaped_for_its_bound_in_play() -> None:
+    from a2cm_phys.evaluate import play
+    from a2cm_phys.policies import matchup
+    from a2cm_phys.solve.minimax import minimax_bounds
+
+    sc = grid(size=3, pursuers=2, max_steps=50)
+    upper = minimax_bounds(sc).upper_from_start
+    game = matchup(sc, "minimax", "best-response")  # both deterministic, a fixed start
+    result = play(game.scenario, game.pursuers, 8, 4, 0, game.evader)
+    assert np.all(result.lengths == upper) and result.captured.all()
+    random = matchup(sc, "minimax", "random")
+    assert play(random.scenario, random.pursuers, 200, 8, 0).lengths.max() <= upper

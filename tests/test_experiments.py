@@ -61,6 +61,9 @@ def test_report_end_to_end_on_tiny_budgets(
     assert "[s0](../runs/paper/grid-a2cm-s0)" in text  # rows link their runs
     assert "2.939 (optimum)" in text and "82,119" in text
     assert "Cross-play" in text and "evader: flee" in text
+    # exact bounds from the minimax solver, truncated at the same 5 steps: [3, 5]
+    assert "minimax capture time lies in [3, 5]" in text
+    assert "| minimax | " in text  # the minimax team is a row of the cross-play table
     assert "a2cm_phys 0." in text and "Total wall time" in text
     assert "Every planned run finished." in text
     for name in re.findall(r"!\[[^]]*\]\((figures/[^)]+)\)", text):
@@ -105,6 +108,23 @@ def test_bad_options_are_one_line_errors(
         assert word in err
 
 
+def test_session_totals_count_overlapping_sessions_once() -> None:
+    from a2cm_phys.report.build import session_totals
+
+    sessions = [
+        {"command": "x --sequential", "elapsed_s": 50.0},  # an old record: no start time
+        {"command": "x", "elapsed_s": 100.0, "started": 1000.0, "training": "sequential"},
+        {"command": "x", "elapsed_s": 100.0, "started": 1050.0, "training": "sequential"},
+        {"command": "x", "elapsed_s": 10.0, "started": 2000.0, "training": "on Ray"},
+        {"command": "x --report-only", "elapsed_s": 5.0, "started": 3000.0, "training": "r"},
+    ]
+    totals = session_totals(sessions)
+    assert totals["total_wall"] == 265.0
+    assert totals["clock_wall"] == 50.0 + 150.0 + 10.0 + 5.0  # 1000–1150 counted once
+    assert totals["sessions"] == 5
+    assert totals["parallel"] == "sequential, on Ray"  # report-only sessions train nothing
+
+
 # --------------------------------------------------------------------------- statistics
 
 
@@ -114,6 +134,16 @@ def test_mean_interval_is_students_t() -> None:
     assert m == 2.0 and lo == pytest.approx(2 - half) and hi == pytest.approx(2 + half)
     assert np.isnan(mean_interval([4.0])[1]) and mean_interval([4.0])[0] == 4.0
     assert np.isnan(mean_interval([])[0])
+
+
+def test_mean_interval_floor_clips_only_the_lower_bound() -> None:
+    values = [0.0, 0.0, 0.0, 0.0, 0.5]  # collisions per episode: t reaches below 0
+    m, lo, hi = mean_interval(values)
+    assert lo < 0.0
+    assert mean_interval(values, floor=0.0) == (m, 0.0, hi)
+    assert mean_interval([2.0, 3.0, 4.0], floor=0.0) == mean_interval([2.0, 3.0, 4.0])
+    rates = [1.0, 1.0, 1.0, 1.0, 0.5]
+    assert mean_interval(rates)[2] > 1.0 and mean_interval(rates, ceiling=1.0)[2] == 1.0
 
 
 def test_welch_p_one_sided_and_degenerate_cases() -> None:

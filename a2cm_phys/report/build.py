@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -16,10 +17,43 @@ from .measure import (
     cross_play,
     exploit,
     measure,
+    minimax_bounds,
     oracle_worst_case,
     reference,
 )
 from .plan import EXPERIMENTS, PlannedRun
+
+
+def session_totals(sessions: list[dict[str, Any]]) -> dict[str, Any]:
+    """What the recorded sessions of the command add up to.
+
+    ``total_wall``: the sum of their durations; ``clock_wall``: the wall-clock time they
+    covered, sessions that ran at the same time counted once (sessions recorded without a
+    start time are added whole); ``sessions``; ``parallel``: how their runs were trained
+    (older records without it: read from the command).
+    """
+    spans, clock = [], 0.0
+    for s in sessions:
+        if "started" in s:
+            spans.append((float(s["started"]), float(s["started"]) + float(s["elapsed_s"])))
+        else:
+            clock += float(s["elapsed_s"])
+    end = -math.inf
+    for lo, hi in sorted(spans):
+        clock += max(0.0, hi - max(lo, end))
+        end = max(end, hi)
+    ways = []
+    for s in sessions:
+        if "--report-only" in s["command"]:
+            continue  # trained nothing
+        how = s.get("training") or ("sequential" if "--sequential" in s["command"] else "on Ray")
+        ways.append(how)
+    return {
+        "total_wall": sum(float(s["elapsed_s"]) for s in sessions),
+        "clock_wall": clock,
+        "sessions": len(sessions),
+        "parallel": ", ".join(dict.fromkeys(ways)) or "none: the runs existed already",
+    }
 
 
 def _why_missing(run: PlannedRun, errors: dict[str, str]) -> str:
@@ -145,9 +179,10 @@ def build_report(
         horizon = args.exploit_max_steps
         if any(sp.values()) and not args.no_exploit:
             data.oracle_worst_case = oracle_worst_case("grid_vs", horizon, cache)
+            data.minimax = minimax_bounds("grid_vs", horizon, cache)
             for algo, results in sp.items():
                 data.exploit[algo] = [{**exploit(r.run, horizon), "seed": r.seed} for r in results]
-        pursuers: dict[str, list[str]] = {"oracle": ["oracle"]}
+        pursuers: dict[str, list[str]] = {"oracle": ["oracle"], "minimax": ["minimax"]}
         evaders: dict[str, list[str]] = {"random": ["random"], "flee": ["flee"]}
         for algo, results in sp.items():
             dirs = [str(r.run.run_dir) for r in sorted(results, key=lambda r: r.seed)]
@@ -169,15 +204,22 @@ def build_report(
     except (OSError, ValueError):
         sessions = []
     elapsed = time.perf_counter() - start
-    sessions.append({"command": meta["command"], "date": meta["date"], "elapsed_s": elapsed})
+    sessions.append(
+        {
+            "command": meta["command"],
+            "date": meta["date"],
+            "elapsed_s": elapsed,
+            "started": time.time() - elapsed,
+            "training": meta["parallel"],
+        }
+    )
     sessions_path.write_text(json.dumps(sessions, indent=1) + "\n")
     meta = {
         **meta,
         "version": __version__,
         "runs": sum(len(v) for v in by_cell.values()),
         "elapsed": elapsed,
-        "total_wall": sum(s["elapsed_s"] for s in sessions),
-        "sessions": len(sessions),
+        **session_totals(sessions),
     }
     (out / "RESULTS.md").write_text(report(data, claims, out, figures, crossplay, missing, meta))
     rows = [
@@ -207,6 +249,7 @@ def build_report(
         },
         "exploit": data.exploit,
         "oracle_worst_case": data.oracle_worst_case,
+        "minimax": data.minimax,
         "crossplay": crossplay,
         "missing": [{"run": f"{r.cell.group}/{r.spec.name}", "why": w} for r, w in missing],
     }

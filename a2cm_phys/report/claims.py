@@ -50,6 +50,7 @@ class Data:
     pursuit: dict[str, dict[str, Any]] = field(default_factory=dict)
     exploit: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     oracle_worst_case: dict[str, Any] | None = None
+    minimax: dict[str, Any] | None = None
     modes: list[str] = field(default_factory=list)
     groups: list[str] = field(default_factory=list)
 

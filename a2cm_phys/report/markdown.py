@@ -15,8 +15,8 @@ from .measure import RunResult
 from .plan import CONTINUOUS, EXPERIMENTS, GROUP_TITLES, PlannedRun
 
 
-def _ci(values: list[float], digits: int = 3) -> str:
-    m, lo, hi = mean_interval(values)
+def _ci(values: list[float], digits: int = 3, ceiling: float | None = None) -> str:
+    m, lo, hi = mean_interval(values, floor=0.0, ceiling=ceiling)  # all tabulated are >= 0
     if not np.isfinite(m):
         return "—"
     if not np.isfinite(lo):
@@ -143,7 +143,7 @@ def continuous_section(data: Data, out: Path, figures: dict[str, Path]) -> list[
             lines.append(
                 f"| {scenario} | {algo.upper()} | {len(runs)} | "
                 f"{_ci([r.greedy.get('length', np.nan) for r in runs])} | "
-                f"{_ci([r.greedy.get('capture_rate', np.nan) for r in runs])} | "
+                f"{_ci([r.greedy.get('capture_rate', np.nan) for r in runs], ceiling=1.0)} | "
                 f"{_ci([r.greedy.get('collisions', np.nan) for r in runs])} | "
                 f"{fmt(p.get('length', np.nan))} | {fmt(p.get('collisions', np.nan))} | "
                 f"{_ci([r.late_length for r in runs])} | {_ci([r.wall_time for r in runs])} | "
@@ -151,6 +151,19 @@ def continuous_section(data: Data, out: Path, figures: dict[str, Path]) -> list[
             )
     lines += figure_lines(figures, "continuous/physics", "continuous", out)
     return [*lines, ""]
+
+
+def _minimax_text(bounds: dict[str, Any] | None) -> str:
+    if not bounds:
+        return ""
+    return (
+        f" The game's minimax capture time lies in [{fmt(bounds['lower'])}, "
+        f"{fmt(bounds['upper'])}] (`python -m a2cm_phys.oracle --scenario grid_vs "
+        "--best-response evader --pursuers minimax`: the evader moving first, then the "
+        "pursuers), so no team is escaped for less than the lower figure, and the *minimax "
+        "team*, deterministic and optimal when the evader sees its move, has worst case "
+        f"{fmt(bounds['upper'])}: a team more robust than the oracle exists."
+    )
 
 
 def selfplay_section(
@@ -165,7 +178,8 @@ def selfplay_section(
         "the value of the evader's exact best response to the final pursuers, E[min(capture "
         "time, horizon)]; *pursuers' BR*: the exact best response of a pursuer team to the "
         "final learned evader. The oracle optimal against the random evader has worst case "
-        f"{fmt((data.oracle_worst_case or {}).get('exploit_worst_case', np.nan), 4)}.",
+        f"{fmt((data.oracle_worst_case or {}).get('exploit_worst_case', np.nan), 4)}."
+        + _minimax_text(data.minimax),
         "",
         "| algo | seed | steps, last 10% | greedy vs random evader | worst case | pursuers' BR "
         "| horizon | exploit s | run |",
@@ -235,8 +249,13 @@ def wall_section(
     lines += [
         "",
         f"Total wall time of the command(s) that made this report: {meta['total_wall']:,.0f} s "
-        f"over {meta['sessions']} session(s) (training runs {meta['parallel']}), of which this "
-        f"session {meta['elapsed']:,.0f} s.",
+        f"over {meta['sessions']} session(s), some of which ran side by side "
+        f"({meta['clock_wall']:,.0f} s of wall clock, overlaps counted once; training runs "
+        f"{meta['parallel']}), of which this session {meta['elapsed']:,.0f} s."
+        if meta["clock_wall"] < meta["total_wall"] - 1.0
+        else f"Total wall time of the command(s) that made this report: "
+        f"{meta['total_wall']:,.0f} s over {meta['sessions']} session(s) (training runs "
+        f"{meta['parallel']}), of which this session {meta['elapsed']:,.0f} s.",
         "",
     ]
     if missing:
@@ -264,7 +283,8 @@ def report(
         f"a2cm_phys {meta['version']}; groups {', '.join(data.groups)}; seeds "
         f"{meta['seeds']}; {meta['runs']} runs. {meta['budget']}",
         "",
-        "Figures are means across seeds with 95% intervals: Student t for a mean, percentile "
+        "Figures are means across seeds with 95% intervals: Student t for a mean (clipped at 0, "
+        "below which no count, rate or length lies), percentile "
         "bootstrap (scipy) for a ratio, stratified bootstrap for aggregates. *Greedy* is the "
         f"final policy taking its most probable actions over {meta['eval_episodes']:,} "
         "evaluation episodes; *steps, last 10%* the mean episode length over the last 10% of "

@@ -233,6 +233,23 @@ def oracle_worst_case(scenario_name: str, horizon: int | None, cache: Path) -> d
     return _cached(cache, key, compute)
 
 
+def minimax_bounds(scenario_name: str, horizon: int | None, cache: Path) -> dict[str, Any]:
+    """The bounds on the game's minimax capture time and the minimax team's worst case
+    (exact, :mod:`a2cm_phys.solve.minimax`): ``{"lower", "upper", "horizon"}``."""
+    scenario = load_scenario(scenario_name)
+    h = min(horizon or scenario.max_steps, scenario.max_steps)
+    key = json.dumps(["minimax-bounds", scenario_name, h])
+
+    def compute() -> dict[str, Any]:
+        from ..policies import grid_twin
+        from ..solve.minimax import minimax_bounds as solve
+
+        bounds = solve(dataclasses.replace(grid_twin(scenario), max_steps=h))
+        return {"lower": bounds.lower_from_start, "upper": bounds.upper_from_start, "horizon": h}
+
+    return _cached(cache, key, compute)
+
+
 def cross_play(
     scenario_name: str,
     pursuers: dict[str, list[str]],

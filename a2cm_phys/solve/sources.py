@@ -2,7 +2,8 @@
 accept, as a library.
 
 Pursuers: ``random`` (uniform), ``oracle`` (the exact optimum of the scenario against its
-scripted evader, from the cache or solved) or a run directory (its trained actors).
+scripted evader, from the cache or solved), ``minimax`` (the deterministic team optimal when
+the evader sees its move, :mod:`.minimax`) or a run directory (its trained actors).
 Evader: ``random``, ``flee``, ``static`` or a run directory with a learned evader. Each
 gives a :class:`Source`: the policy table (:mod:`.tables`) and a label to print.
 """
@@ -25,7 +26,7 @@ from .tables import (
     uniform_table,
 )
 
-PURSUER_NAMES = ("random", "oracle")
+PURSUER_NAMES = ("random", "oracle", "minimax")
 """Named pursuer policies (anything else is a run directory)."""
 
 
@@ -36,7 +37,8 @@ class SourceError(ValueError):
 @dataclass
 class Source:
     """A policy table and what it is. ``solution`` is the oracle's, when the table is one
-    (an :class:`~a2cm_phys.oracle.OracleSolution`, with its cache status and statistics)."""
+    (an :class:`~a2cm_phys.oracle.OracleSolution`, with its cache status and statistics),
+    or the :class:`~.minimax.MinimaxBounds` the minimax team comes from."""
 
     table: np.ndarray
     label: str
@@ -92,14 +94,20 @@ def pursuer_source(
     cache_dir: str | Path | None = None,
     use_cache: bool = True,
 ) -> Source:
-    """The pursuers' table of ``random``, ``oracle`` or a run directory.
+    """The pursuers' table of ``random``, ``oracle``, ``minimax`` or a run directory.
 
     ``oracle`` needs the scenario's evader to be scripted (the oracle is optimal against
-    it). Raises :class:`SourceError`, or the oracle's TooLargeError / UnsupportedError.
+    it). Raises :class:`SourceError`, or the solvers' TooLargeError / UnsupportedError.
     """
     n = scenario.pursuers
     if spec == "random":
         return Source(uniform_table(scenario, n), "uniformly random pursuers")
+    if spec == "minimax":
+        from .minimax import minimax_bounds
+
+        bounds = minimax_bounds(scenario)
+        label = "the minimax team (deterministic, optimal when the evader sees its move)"
+        return Source(joint_policy_table(scenario, bounds.policy), label, bounds)
     if spec == "oracle":
         from ..oracle import load_or_solve
 
