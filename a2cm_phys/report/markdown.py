@@ -153,16 +153,22 @@ def continuous_section(data: Data, out: Path, figures: dict[str, Path]) -> list[
     return [*lines, ""]
 
 
-def _minimax_text(bounds: dict[str, Any] | None) -> str:
+def _minimax_text(bounds: dict[str, Any] | None, oracle: dict[str, Any] | None) -> str:
     if not bounds:
         return ""
+    oracle_worst = (oracle or {}).get("exploit_worst_case", np.nan)
+    verdict = (
+        ": a team more robust than the oracle exists"
+        if bounds["upper"] < oracle_worst
+        else ", no better than the oracle's"
+    )
     return (
         f" The game's minimax capture time lies in [{fmt(bounds['lower'])}, "
         f"{fmt(bounds['upper'])}] (`python -m a2cm_phys.oracle --scenario grid_vs "
         "--best-response evader --pursuers minimax`: the evader moving first, then the "
         "pursuers), so no team is escaped for less than the lower figure, and the *minimax "
         "team*, deterministic and optimal when the evader sees its move, has worst case "
-        f"{fmt(bounds['upper'])}: a team more robust than the oracle exists."
+        f"{fmt(bounds['upper'])}{verdict}."
     )
 
 
@@ -179,7 +185,7 @@ def selfplay_section(
         "time, horizon)]; *pursuers' BR*: the exact best response of a pursuer team to the "
         "final learned evader. The oracle optimal against the random evader has worst case "
         f"{fmt((data.oracle_worst_case or {}).get('exploit_worst_case', np.nan), 4)}."
-        + _minimax_text(data.minimax),
+        + _minimax_text(data.minimax, data.oracle_worst_case),
         "",
         "| algo | seed | steps, last 10% | greedy vs random evader | worst case | pursuers' BR "
         "| horizon | exploit s | run |",
@@ -283,8 +289,9 @@ def report(
         f"a2cm_phys {meta['version']}; groups {', '.join(data.groups)}; seeds "
         f"{meta['seeds']}; {meta['runs']} runs. {meta['budget']}",
         "",
-        "Figures are means across seeds with 95% intervals: Student t for a mean (clipped at 0, "
-        "below which no count, rate or length lies), percentile "
+        "Figures are means across seeds with 95% intervals: Student t for a mean (clipped to "
+        "the quantity's range: no count, rate or length is below 0, no rate above 1), "
+        "percentile "
         "bootstrap (scipy) for a ratio, stratified bootstrap for aggregates. *Greedy* is the "
         f"final policy taking its most probable actions over {meta['eval_episodes']:,} "
         "evaluation episodes; *steps, last 10%* the mean episode length over the last 10% of "
