@@ -121,3 +121,18 @@ def test_cli_config_error_is_one_line_without_traceback():
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     assert "key 'size'" in proc.stderr
+
+
+def test_entropy_coef_is_resolved_by_the_evader_and_an_explicit_value_wins() -> None:
+    from a2cm_phys.config import ENTROPY_COEF, preset, resolve_train
+
+    unset = load_train()
+    assert unset.entropy_coef is None
+    assert resolve_train(load_scenario("grid_vs"), unset).entropy_coef == ENTROPY_COEF["learned"]
+    for name in ("grid", "grid_collision", "phys_vs", "phys_cont_vs", "phys_cont"):
+        assert resolve_train(load_scenario(name), unset).entropy_coef == ENTROPY_COEF["scripted"]
+    assert ENTROPY_COEF["scripted"] == preset("paper")["entropy_coef"]  # scripted: unchanged
+    chosen = load_train({"entropy_coef": 0.5})
+    assert resolve_train(load_scenario("grid_vs"), chosen).entropy_coef == 0.5
+    with pytest.raises(ConfigError, match="entropy_coef"):
+        load_train({"entropy_coef": -1.0})

@@ -43,6 +43,7 @@ import torch
 
 from a2cm_phys.algos.normalize import ValueNorm
 from a2cm_phys.algos.returns import gae
+from a2cm_phys.config import ENTROPY_COEF
 
 if TYPE_CHECKING:
     from a2cm_phys.algos.models import ActorCritic
@@ -116,6 +117,8 @@ class Learner:
     ) -> None:
         self.model = model
         self.cfg = train_cfg
+        entropy = train_cfg.entropy_coef  # None: unresolved (no scenario), the usual value
+        self.entropy_coef = ENTROPY_COEF["scripted"] if entropy is None else entropy
         self.shaping = shaping
         self.optimizer = make_optimizer(model, train_cfg)
         self.device = next(model.parameters()).device
@@ -203,7 +206,7 @@ class Learner:
         policy_loss = -(actor_adv * log_prob).mean(dim=(0, 1)).sum()
         entropy_sum = entropy.mean(dim=(0, 1)).sum()
         value_loss = (targets - out).pow(2).mean(dim=(0, 1)).sum()
-        loss = policy_loss - cfg.entropy_coef * entropy_sum + cfg.value_coef * value_loss
+        loss = policy_loss - self.entropy_coef * entropy_sum + cfg.value_coef * value_loss
         if model.log_std is not None and cfg.mean_bound_coef:  # None (unresolved): off
             loss = loss + cfg.mean_bound_coef * mean_bound_loss(dist_out)
 
