@@ -54,6 +54,7 @@ def test_report_end_to_end_on_tiny_budgets(
         "Continuous A2CM within 5% of pursuit",
         "at least 20% faster than pursuit",
         "less exploitable than the oracle",
+        "self-play evader outlasts the random and fleeing evaders",
     ):
         assert claim in claims, claim
     assert re.search(r"\*\*(holds|does not hold|inconclusive)\*\* \| Welch t", claims)

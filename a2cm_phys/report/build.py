@@ -196,6 +196,7 @@ def build_report(
             ]
         if len(pursuers) > 1:
             crossplay = cross_play("grid_vs", pursuers, evaders, args.crossplay_episodes, cache)
+            data.crossplay = crossplay
     figures = _figures(data, out, groups, modes)
     claims = paper_claims(data) + our_claims(data)
     sessions_path = logdir / "report_sessions.json"
