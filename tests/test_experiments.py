@@ -190,3 +190,17 @@ def test_verdicts() -> None:
     assert verdict_test(0.99, 0.01) == "does not hold"
     assert verdict_test(0.2, 0.8) == "inconclusive"
     assert verdict_test(np.nan, np.nan) == "inconclusive"
+
+
+def test_cross_play_cache_tells_a_retrained_run_from_the_old_one(tmp_path: Path) -> None:
+    import os
+
+    from a2cm_phys.report.measure import _stamped
+
+    run = tmp_path / "grid_vs-a2cm-s0"
+    run.mkdir()
+    (run / "checkpoint.pt").write_bytes(b"old")
+    before = _stamped((str(run), "random"))
+    assert before[1] == "random"  # named policies are their own identity
+    os.utime(run / "checkpoint.pt", ns=(1, 1))  # trained again in the same directory
+    assert _stamped((str(run), "random"))[0] != before[0]

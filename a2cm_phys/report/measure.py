@@ -250,6 +250,16 @@ def minimax_bounds(scenario_name: str, horizon: int | None, cache: Path) -> dict
     return _cached(cache, key, compute)
 
 
+def _stamped(pair: tuple[str, str]) -> list[str]:
+    """A pairing's cache identity: each run directory with its checkpoint's modification
+    time, so that a run trained again in the same directory is measured again."""
+    out = []
+    for spec in pair:
+        checkpoint = Path(spec) / "checkpoint.pt"
+        out.append(f"{spec}@{checkpoint.stat().st_mtime_ns}" if checkpoint.exists() else spec)
+    return out
+
+
 def cross_play(
     scenario_name: str,
     pursuers: dict[str, list[str]],
@@ -271,7 +281,7 @@ def cross_play(
                 pairs = list(zip(p_list, e_list, strict=False))
             else:
                 pairs = [(p, e) for p in p_list for e in e_list]
-            key = json.dumps(["cross", scenario_name, pairs, episodes])
+            key = json.dumps(["cross", scenario_name, [_stamped(p) for p in pairs], episodes])
 
             def compute(pairs: list[tuple[str, str]] = pairs) -> list[dict[str, float]]:
                 out = []
