@@ -553,12 +553,11 @@ keys were added after runs whose stored configs lack them: they mean the discret
 ENTROPY_COEF: dict[str, float] = {"scripted": 1e-4, "learned": 0.03}
 """``Train.entropy_coef`` when unset, by the evader: the paper's 1e-4, and 0.03 (both teams)
 where a learned evader plays on the grid (physics self-play keeps 1e-4: not measured
-there). In grid self-play the paper's value
-lets both actors turn near-deterministic, so each is exploited by the other's next policy:
-over 5 seeds (A2CM, means) 0.03 took the pursuers from 12.9 to 3.65 steps against the
-random evader and from 826 to 8.96 against the fleeing one, and the learned evader from
-2.65 to 4.44 steps against the oracle (``BENCHMARKS.md``, "Self-play: the entropy
-coefficient")."""
+there). In grid self-play the paper's value lets both actors turn near-deterministic, so
+each is exploited by the other's next policy: over 5 seeds (A2CM, means) 0.03 took the
+pursuers from 12.9 to 3.65 steps against the random evader and from 826 to 8.96 against
+the fleeing one, and the learned evader from 2.65 to 4.44 steps against the oracle
+(``BENCHMARKS.md``, "Self-play: the entropy coefficient")."""
 
 
 def resolve_train(scenario: Scenario, cfg: Train) -> Train:
