@@ -104,17 +104,16 @@ def minimax_policy(scenario: Scenario) -> Policy:
     :class:`~a2cm_phys.config.ConfigError` outside grid mode or where it cannot be solved.
     """
     from .solve import TooLargeError, UnsupportedError
-    from .solve.minimax import minimax_bounds
-    from .solve.tables import TablePolicy, joint_policy_table
+    from .solve.sources import pursuer_source
+    from .solve.tables import TablePolicy
 
     if scenario.mode != "grid":
         raise ConfigError("minimax policy: the minimax team is solved on grids only")
     twin = grid_twin(scenario)
     try:
-        bounds = minimax_bounds(twin)
+        team = TablePolicy(twin, pursuer_source(twin, "minimax").table)
     except (TooLargeError, UnsupportedError) as err:
         raise ConfigError(f"minimax policy: {err}") from None
-    team = TablePolicy(twin, joint_policy_table(twin, bounds.policy))
     return lambda obs, rng: team.act(obs, rng, greedy=True)
 
 

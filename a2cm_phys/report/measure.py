@@ -213,22 +213,29 @@ def exploit(run: PlannedRun, horizon: int | None) -> dict[str, Any]:
     return _cached(run.run_dir / "report_exploit.json", f"h{h}", compute)
 
 
-def oracle_worst_case(scenario_name: str, horizon: int | None, cache: Path) -> dict[str, Any]:
-    """The worst case of the oracle that is optimal against the random evader (exact)."""
+def _grid_game(scenario_name: str, horizon: int | None) -> tuple[Scenario, int, bool]:
+    """The grid game the solvers play for a scenario (its grid twin, :func:`grid_twin`)
+    truncated at ``horizon`` (``None``: its ``max_steps``), the horizon, and whether it
+    truncates."""
+    from ..policies import grid_twin
+
     scenario = load_scenario(scenario_name)
     h = min(horizon or scenario.max_steps, scenario.max_steps)
+    return dataclasses.replace(grid_twin(scenario), max_steps=h), h, h < scenario.max_steps
+
+
+def oracle_worst_case(scenario_name: str, horizon: int | None, cache: Path) -> dict[str, Any]:
+    """The worst case of the oracle that is optimal against the random evader (exact)."""
+    twin, h, truncated = _grid_game(scenario_name, horizon)
     key = json.dumps(["oracle-worst-case", scenario_name, h])
 
     def compute() -> dict[str, Any]:
-        from ..policies import grid_twin
         from ..solve.best_response import evader_best_response
         from ..solve.sources import pursuer_source
 
-        twin = dataclasses.replace(grid_twin(scenario), max_steps=h)
         table = pursuer_source(twin, "oracle").table
         value = evader_best_response(twin, table).value_from_start
-        return {"exploit_worst_case": float(value), "horizon": h,
-                "truncated": h < scenario.max_steps}  # fmt: skip
+        return {"exploit_worst_case": float(value), "horizon": h, "truncated": truncated}
 
     return _cached(cache, key, compute)
 
@@ -236,15 +243,13 @@ def oracle_worst_case(scenario_name: str, horizon: int | None, cache: Path) -> d
 def minimax_bounds(scenario_name: str, horizon: int | None, cache: Path) -> dict[str, Any]:
     """The bounds on the game's minimax capture time and the minimax team's worst case
     (exact, :mod:`a2cm_phys.solve.minimax`): ``{"lower", "upper", "horizon"}``."""
-    scenario = load_scenario(scenario_name)
-    h = min(horizon or scenario.max_steps, scenario.max_steps)
+    twin, h, _ = _grid_game(scenario_name, horizon)
     key = json.dumps(["minimax-bounds", scenario_name, h])
 
     def compute() -> dict[str, Any]:
-        from ..policies import grid_twin
         from ..solve.minimax import minimax_bounds as solve
 
-        bounds = solve(dataclasses.replace(grid_twin(scenario), max_steps=h))
+        bounds = solve(twin)
         return {"lower": bounds.lower_from_start, "upper": bounds.upper_from_start, "horizon": h}
 
     return _cached(cache, key, compute)
