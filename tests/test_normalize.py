@@ -59,3 +59,19 @@ def test_state_round_trip() -> None:
     b.load_state_dict(a.state_dict())
     for x, y in zip(a.stats(), b.stats(), strict=True):
         assert torch.equal(x, y)
+
+
+def test_stats_follow_every_update_and_load() -> None:
+    """stats() is computed once per change (a learner reads it five times an update), so
+    every update and every load must replace what it returned before."""
+    norm, fresh = ValueNorm(2, beta=0.5), ValueNorm(2, beta=0.5)
+    for scale in (1.0, 100.0, 0.01):
+        before = norm.stats()
+        norm.update(torch.randn(16, 2) * scale)
+        fresh.load_state_dict(norm.state_dict())  # recomputes from the raw moments
+        after = norm.stats()
+        assert not torch.equal(after[1], before[1])
+        for x, y in zip(after, fresh.stats(), strict=True):
+            assert torch.equal(x, y)
+    norm.load_state_dict(ValueNorm(2).state_dict())
+    assert torch.equal(norm.stats()[1], torch.ones(2))

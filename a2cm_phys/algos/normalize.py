@@ -37,9 +37,15 @@ class ValueNorm:
         self.mean = torch.zeros(self.shape, dtype=torch.float64)
         self.mean_sq = torch.zeros(self.shape, dtype=torch.float64)
         self.debias = torch.zeros((), dtype=torch.float64)
+        self._stats: tuple[torch.Tensor, torch.Tensor] | None = None
 
     def stats(self) -> tuple[torch.Tensor, torch.Tensor]:
         """``(μ, σ)`` per component (``(0, 1)`` before the first update)."""
+        if self._stats is None:  # a learner update reads them five times: compute once
+            self._stats = self._compute_stats()
+        return self._stats
+
+    def _compute_stats(self) -> tuple[torch.Tensor, torch.Tensor]:
         if self.debias.item() == 0.0:
             return torch.zeros_like(self.mean), torch.ones_like(self.mean)
         mean = self.mean / self.debias
@@ -59,6 +65,7 @@ class ValueNorm:
         self.mean.mul_(b).add_(flat.mean(0), alpha=1 - b)
         self.mean_sq.mul_(b).add_((flat**2).mean(0), alpha=1 - b)
         self.debias.mul_(b).add_(1 - b)
+        self._stats = None
         if layer is None:
             return
         new_mean, new_std = self.stats()
@@ -87,3 +94,4 @@ class ValueNorm:
         self.mean = state["mean"].clone().double()
         self.mean_sq = state["mean_sq"].clone().double()
         self.debias = torch.as_tensor(state["debias"], dtype=torch.float64).clone()
+        self._stats = None
