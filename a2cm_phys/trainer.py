@@ -214,8 +214,9 @@ class Trainer:
         non-finite loss stops the run without overwriting the last good checkpoint. A
         physics worker that dies stops the run with the checkpoint at the last whole update
         (:attr:`stop_reason` names the worker). :attr:`stop_signal` is the signal that
-        stopped an interrupted run.
+        stopped an interrupted run. The run directory is created if it does not exist.
         """
+        self.run_dir.mkdir(parents=True, exist_ok=True)
         if not (self.run_dir / checkpoint.CHECKPOINT_NAME).exists():
             self.save_checkpoint()  # so there is always a last good checkpoint
         self._last_save = time.perf_counter()

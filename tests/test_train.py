@@ -290,3 +290,11 @@ def test_a_resumed_run_continues_its_episode_log(tmp_path, monkeypatch):
     summary = json.loads((run_dir / "summary.json").read_text())
     assert ids == list(range(summary["episodes"]))
     assert all(lg.clean for lg in logs)
+
+
+def test_trainer_creates_a_missing_run_directory(tmp_path: Path) -> None:
+    """The Python API needs no mkdir first: run() makes the directory it saves into."""
+    run_dir = tmp_path / "not" / "yet" / "there"
+    trainer = Trainer(load_scenario("grid"), load_train({"updates": 2}), run_dir, record=False)
+    assert trainer.run() == "done"
+    assert (run_dir / checkpoint.CHECKPOINT_NAME).is_file()
