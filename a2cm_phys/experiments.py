@@ -10,7 +10,8 @@ Groups of cells (scenario × algorithm × seed), each a sweep in ``<logdir>/<gro
   ``--preset paper`` (the faithful reproduction), ``--updates`` each (the paper: 5,000);
 - ``ours``: the same with our defaults;
 - ``continuous``: ``phys_cont``, ``phys_cont_flee``, ``phys_cont_collision`` × A2C/A2CM,
-  beside ``pursuit`` played on the same scenario (``--cont-updates``, ``--cont-set``);
+  beside ``pursuit`` played on the same scenario (``--cont-updates``, by default
+  continuous control's 15,625: 2,000,000 steps; ``--cont-set``);
 - ``selfplay``: ``grid_vs`` × A2C/A2CM pursuers against a learning evader, the cross-play
   table and the exact exploitability of the final actors (``--exploit-max-steps``
   truncates the best response's horizon, ``--no-exploit`` skips it).
@@ -43,7 +44,7 @@ from .cli import (
     split_assignments,
     writable_dir,
 )
-from .config import ConfigError, load_train
+from .config import CONTROL_DEFAULTS, ConfigError, load_train
 from .report.plan import (
     ALGOS,
     EXPERIMENTS,
@@ -70,7 +71,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--updates", type=int_range(1), default=5000, help="paper/ours runs (the paper: 5,000)"
     )
-    p.add_argument("--cont-updates", type=int_range(1), default=5000, help="continuous runs")
+    p.add_argument(
+        "--cont-updates",
+        type=int_range(1),
+        help="continuous runs (default: train's, 15,625 = 2,000,000 steps at 10 Hz)",
+    )
     p.add_argument("--selfplay-updates", type=int_range(1), default=5000, help="self-play runs")
     for flag, what in (
         ("--set", "every group: train.KEY=VALUE"),
@@ -104,6 +109,11 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _given(key: str, value: Any) -> dict[str, Any]:
+    """``{key: value}``, or nothing when the option was not given (train's default)."""
+    return {} if value is None else {key: value}
+
+
 def _options(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, GroupOptions]]:
     scenario, base = split_assignments(args.set)
     if scenario:
@@ -118,7 +128,9 @@ def _options(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, GroupO
     options = {
         "paper": GroupOptions({"updates": args.updates}),
         "ours": GroupOptions({"updates": args.updates}),
-        "continuous": GroupOptions({"updates": args.cont_updates, **cont_train}, cont_scenario),
+        "continuous": GroupOptions(
+            {**_given("updates", args.cont_updates), **cont_train}, cont_scenario
+        ),
         "selfplay": GroupOptions({"updates": args.selfplay_updates, **sp_train}),
     }
     return base, options
@@ -245,7 +257,8 @@ def _main(argv: Sequence[str]) -> int:
         "seeds": args.seeds,
         "eval_episodes": args.eval_episodes,
         "budget": f"Updates of 128 steps: {args.updates:,} (paper, ours), "
-        f"{args.cont_updates:,} (continuous), {args.selfplay_updates:,} (self-play).",
+        f"{args.cont_updates or CONTROL_DEFAULTS['continuous']['updates']:,} (continuous), "
+        f"{args.selfplay_updates:,} (self-play).",
     }
     missing = build_report(runs, errors, out, logdir, meta, start, args, groups, modes)
     print(f"report: {out / 'RESULTS.md'}")

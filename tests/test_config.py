@@ -136,3 +136,19 @@ def test_entropy_coef_is_resolved_by_the_evader_and_an_explicit_value_wins() -> 
     assert resolve_train(load_scenario("grid_vs"), chosen).entropy_coef == 0.5
     with pytest.raises(ConfigError, match="entropy_coef"):
         load_train({"entropy_coef": -1.0})
+
+
+def test_updates_are_resolved_by_the_control_type_and_an_explicit_value_wins() -> None:
+    from a2cm_phys.config import preset, resolve_train
+
+    unset = load_train()
+    assert unset.updates is None
+    for name in ("grid", "grid_collision", "phys", "grid_vs"):
+        assert resolve_train(load_scenario(name), unset).updates == preset("paper")["updates"]
+    for name in ("phys_cont", "phys_cont_flee", "phys_cont_vs"):
+        resolved = resolve_train(load_scenario(name), unset)
+        assert resolved.updates * resolved.batch_size == 2_000_000
+    chosen = load_train({"updates": 7})
+    assert resolve_train(load_scenario("phys_cont"), chosen).updates == 7
+    with pytest.raises(ConfigError, match="updates"):
+        load_train({"updates": 0})

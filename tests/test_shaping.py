@@ -161,6 +161,7 @@ def test_runs_written_before_the_options_read_as_without_them():
         del old[key]
     old["log_std_init"] = 0.0  # stored explicitly by then
     old["entropy_coef"] = 1e-4  # every stored run has its value
+    old["updates"] = 5000  # likewise
     filled = stored_train(old)
     assert filled["distance_shaping"] == 0.0 and filled["mean_bound_coef"] == 0.0
     assert filled["pool_every"] == Train().pool_every

@@ -205,10 +205,11 @@ def estimate_seconds(
 ) -> float:
     """Estimated seconds of one run: training (remaining updates), its greedy evaluation
     and, for self-play, the exact exploitability."""
-    from ..config import load_train
+    from ..config import load_train, resolve_train
 
-    cfg = load_train({**run.spec.train, "algo": run.spec.algo, "seed": run.spec.seed})
     scenario = load_scenario(run.spec.scenario, run.spec.overrides)
+    train = {**run.spec.train, "algo": run.spec.algo, "seed": run.spec.seed}
+    cfg = resolve_train(scenario, load_train(train))
     seconds = 0.0
     if run.state != "done":
         seconds += est.per_update * cfg.updates
