@@ -91,7 +91,7 @@ def make_optimizer(model: torch.nn.Module, cfg: Train) -> torch.optim.Optimizer:
     if cfg.optimizer == "adam":
         return torch.optim.Adam(model.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
     return torch.optim.RMSprop(
-        model.parameters(), lr=cfg.lr, alpha=cfg.rmsprop_alpha, eps=cfg.rmsprop_eps, foreach=True
+        model.parameters(), lr=cfg.lr, alpha=cfg.rmsprop_alpha, eps=cfg.rmsprop_eps
     )
 
 
