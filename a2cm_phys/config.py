@@ -561,8 +561,8 @@ continuous control a −1 step reward at 10 Hz alone is not learned and unbounde
 means run away (``BENCHMARKS.md``); discrete control keeps the paper's rewards (and these
 keys were added after runs whose stored configs lack them: they mean the discrete values).
 Updates: the paper's 5,000 (640,000 steps) in discrete control; 15,625 (2,000,000 steps,
-200,000 s of play at 10 Hz) in continuous control, where the Gaussian actors reach
-``pursuit`` against the random evader (after 384,000 steps they took 1.4–1.7× as long)."""
+200,000 s of play at 10 Hz) in continuous control, where A2CM's Gaussian actors match
+``pursuit`` against the random evader (A2C: 1.12×; both 1.4–1.7× after 384,000 steps)."""
 
 
 ENTROPY_COEF: dict[str, float] = {"scripted": 1e-4, "learned": 0.03}
