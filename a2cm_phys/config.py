@@ -567,12 +567,15 @@ Updates: the paper's 5,000 (640,000 steps) in discrete control; 15,625 (2,000,00
 
 ENTROPY_COEF: dict[str, float] = {"scripted": 1e-4, "learned": 0.03}
 """``Train.entropy_coef`` when unset, by the evader: the paper's 1e-4, and 0.03 (both teams)
-where a learned evader plays on the grid (physics self-play keeps 1e-4: not measured
-there). In grid self-play the paper's value lets both actors turn near-deterministic, so
-each is exploited by the other's next policy: over 5 seeds (A2CM, means) 0.03 took the
+where a learned evader plays with discrete actions, on the grid or in physics (continuous
+self-play keeps 1e-4: a Gaussian's entropy is on another scale, and it was not
+measured). In grid self-play the paper's value lets both actors turn near-deterministic,
+so each is exploited by the other's next policy: over 5 seeds (A2CM, means) 0.03 took the
 pursuers from 12.9 to 3.65 steps against the random evader and from 826 to 8.96 against
-the fleeing one, and the learned evader from 2.65 to 4.44 steps against the oracle
-(``BENCHMARKS.md``, "Self-play: the entropy coefficient")."""
+the fleeing one, and the learned evader from 2.65 to 4.44 steps against the oracle. In
+``phys_vs`` (2 seeds) it took the pursuers from 14.4 to 3.6–4.1 steps against the random
+evader, and from never to always catching the fleeing one (``BENCHMARKS.md``, "Self-play:
+the entropy coefficient")."""
 
 
 def resolve_train(scenario: Scenario, cfg: Train) -> Train:
@@ -580,7 +583,7 @@ def resolve_train(scenario: Scenario, cfg: Train) -> Train:
     (:data:`CONTROL_DEFAULTS`) and evader (:data:`ENTROPY_COEF`): what a run records and
     its learner sees."""
     values = dict(CONTROL_DEFAULTS["continuous" if scenario.continuous else "discrete"])
-    learned = scenario.evader == "learned" and scenario.mode == "grid"
+    learned = scenario.evader == "learned" and not scenario.continuous
     values["entropy_coef"] = ENTROPY_COEF["learned" if learned else "scripted"]
     unset = {k: v for k, v in values.items() if getattr(cfg, k) is None}
     return dataclasses.replace(cfg, **unset) if unset else cfg

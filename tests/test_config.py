@@ -128,8 +128,9 @@ def test_entropy_coef_is_resolved_by_the_evader_and_an_explicit_value_wins() -> 
 
     unset = load_train()
     assert unset.entropy_coef is None
-    assert resolve_train(load_scenario("grid_vs"), unset).entropy_coef == ENTROPY_COEF["learned"]
-    for name in ("grid", "grid_collision", "phys_vs", "phys_cont_vs", "phys_cont"):
+    for name in ("grid_vs", "phys_vs"):  # discrete actions against a learned evader
+        assert resolve_train(load_scenario(name), unset).entropy_coef == ENTROPY_COEF["learned"]
+    for name in ("grid", "grid_collision", "phys", "phys_cont_vs", "phys_cont"):
         assert resolve_train(load_scenario(name), unset).entropy_coef == ENTROPY_COEF["scripted"]
     assert ENTROPY_COEF["scripted"] == preset("paper")["entropy_coef"]  # scripted: unchanged
     chosen = load_train({"entropy_coef": 0.5})
