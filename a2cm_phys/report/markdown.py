@@ -252,16 +252,17 @@ def wall_section(
             f"| {group} | {scenario} | {algo.upper()} | {len(runs)} | {_ci(times)} | "
             f"{fmt(float(np.nansum(times)), 4)} |"
         )
+    overlap = (
+        f", some of which ran side by side ({meta['clock_wall']:,.0f} s of wall clock, "
+        "overlaps counted once; "
+        if meta["clock_wall"] < meta["total_wall"] - 1.0
+        else " ("
+    )
     lines += [
         "",
         f"Total wall time of the command(s) that made this report: {meta['total_wall']:,.0f} s "
-        f"over {meta['sessions']} session(s), some of which ran side by side "
-        f"({meta['clock_wall']:,.0f} s of wall clock, overlaps counted once; training runs "
-        f"{meta['parallel']}), of which this session {meta['elapsed']:,.0f} s."
-        if meta["clock_wall"] < meta["total_wall"] - 1.0
-        else f"Total wall time of the command(s) that made this report: "
-        f"{meta['total_wall']:,.0f} s over {meta['sessions']} session(s) (training runs "
-        f"{meta['parallel']}), of which this session {meta['elapsed']:,.0f} s.",
+        f"over {meta['sessions']} session(s){overlap}training runs {meta['parallel']}), of "
+        f"which this session {meta['elapsed']:,.0f} s.",
         "",
     ]
     if missing:
