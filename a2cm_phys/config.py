@@ -201,7 +201,7 @@ class Train:
     rmsprop_alpha: float = 0.9
     rmsprop_eps: float = 1e-7
     gamma: float = 0.99
-    entropy_coef: float | None = None  # None: by the evader (ENTROPY_COEF, resolve_train)
+    entropy_coef: float | None = None  # None: by the game (ENTROPY, resolve_train)
     value_coef: float = 0.5
     hidden: int = 128
     reward_scale: float = 1.0
@@ -219,6 +219,7 @@ class Train:
     balance_rewards: bool = True  # each component's advantage on its own scale
     collision_weight: float = 1.0
     lr_schedule: Schedule = "linear"  # ours; the paper's is constant
+    entropy_schedule: Schedule | None = None  # None: by the game (ENTROPY, resolve_train)
     # Continuous control (ours; None: the value for the scenario's control type, see
     # resolve_train): the Gaussians' initial log-std, a soft bound keeping their means
     # inside the command box (algos/learner.py), and progress shaping on the pursuers'
@@ -310,6 +311,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "value_norm": False,
         "split_rewards": False,
         "lr_schedule": "constant",
+        "entropy_schedule": "constant",
         "constrain_collisions": False,
         "distance_shaping": 0.0,
     },
@@ -565,33 +567,58 @@ Updates: the paper's 5,000 (640,000 steps) in discrete control; 15,625 (2,000,00
 ``pursuit`` against the random evader (A2C: 1.12×; both 1.4–1.7× after 384,000 steps)."""
 
 
-ENTROPY_COEF: dict[str, float] = {"scripted": 1e-4, "learned": 0.03}
-"""``Train.entropy_coef`` when unset, by the evader: the paper's 1e-4, and 0.03 (both teams)
-where a learned evader plays with discrete actions, on the grid or in physics (continuous
-self-play keeps 1e-4: a Gaussian's entropy is on another scale, and it was not
-measured). In grid self-play the paper's value lets both actors turn near-deterministic,
-so each is exploited by the other's next policy: over 5 seeds (A2CM, means) 0.03 took the
-pursuers from 12.9 to 3.65 steps against the random evader and from 826 to 8.96 against
-the fleeing one, and the learned evader from 2.65 to 4.44 steps against the oracle. In
-``phys_vs`` (2 seeds) it took the pursuers from 14.4 to 3.6–4.1 steps against the random
-evader, and from never to always catching the fleeing one (``BENCHMARKS.md``, "Self-play:
-the entropy coefficient")."""
+ENTROPY: dict[str, tuple[float, Schedule]] = {
+    "discrete": (0.03, "linear"),
+    "self-play": (0.03, "constant"),
+    "continuous": (1e-4, "constant"),
+}
+"""``Train.entropy_coef`` and ``entropy_schedule`` when unset, by the game
+(:func:`entropy_game`); the paper's are 1e-4, constant.
+
+- ``discrete`` (discrete actions, scripted evader): 0.03, annealed linearly to 0 with the
+  learning rate. Under the paper's 1e-4 the actors of ``grid_collision`` turned
+  deterministic early, one pursuer walking one way in every state, and ended 16% above the
+  optimum (3.41 steps); annealed 0.03 explores while the collision penalty is learned and
+  ends near-greedy: 2.93–2.94 steps, the optimum, with no collision, for every seed of
+  A2C and A2CM in both collision scenarios, and ``grid_flee`` from 57.5 to 6.1 steps
+  (5 seeds, ``BENCHMARKS.md``, "Entropy").
+- ``self-play`` (discrete actions, learned evader): 0.03 for both teams, constant. Under
+  1e-4 both actors turned near-deterministic, so each was exploited by the other's next
+  policy: over 5 seeds (A2CM, means) 0.03 took the pursuers from 12.9 to 3.65 steps
+  against the random evader and from 826 to 8.96 against the fleeing one, and the learned
+  evader from 2.65 to 4.44 steps against the oracle; in ``phys_vs`` (2 seeds) the pursuers
+  from 14.4 to 3.6–4.1 steps against the random evader ("Self-play: the entropy
+  coefficient").
+- ``continuous`` (Gaussian actors, either evader): the paper's 1e-4; a Gaussian's entropy
+  is on another scale, and nothing else was measured."""
+
+
+def entropy_game(scenario: Scenario) -> str:
+    """The :data:`ENTROPY` row of ``scenario``: ``continuous``, ``self-play`` or
+    ``discrete``."""
+    if scenario.continuous:
+        return "continuous"
+    return "self-play" if scenario.evader == "learned" else "discrete"
 
 
 def resolve_train(scenario: Scenario, cfg: Train) -> Train:
     """``cfg`` with its unset (None) keys given the values of ``scenario``'s control type
-    (:data:`CONTROL_DEFAULTS`) and evader (:data:`ENTROPY_COEF`): what a run records and
+    (:data:`CONTROL_DEFAULTS`) and game (:data:`ENTROPY`): what a run records and
     its learner sees."""
     values = dict(CONTROL_DEFAULTS["continuous" if scenario.continuous else "discrete"])
-    learned = scenario.evader == "learned" and not scenario.continuous
-    values["entropy_coef"] = ENTROPY_COEF["learned" if learned else "scripted"]
+    values["entropy_coef"], values["entropy_schedule"] = ENTROPY[entropy_game(scenario)]
     unset = {k: v for k, v in values.items() if getattr(cfg, k) is None}
     return dataclasses.replace(cfg, **unset) if unset else cfg
+
+
+STORED_BEFORE: dict[str, Any] = {"entropy_schedule": "constant"}
+"""What runs stored before a key existed trained with (every run before the entropy
+schedule had a constant coefficient)."""
 
 
 def stored_train(values: Mapping[str, Any]) -> dict[str, Any]:
     """A stored run's training config completed for keys added after it was written:
     the discrete values of :data:`CONTROL_DEFAULTS` (such runs had none of these pieces),
-    then today's defaults."""
+    :data:`STORED_BEFORE`, then today's defaults."""
     added = {f.name: f.default for f in dataclasses.fields(Train)}
-    return {**added, **CONTROL_DEFAULTS["discrete"], **values}
+    return {**added, **CONTROL_DEFAULTS["discrete"], **STORED_BEFORE, **values}

@@ -46,6 +46,9 @@ PIECES: dict[str, dict[str, Any]] = {
     "cw.5": {"collision_weight": 0.5},
     "cw.3": {"collision_weight": 0.3},
     "ent0": {"entropy_coef": 0.0},
+    "ent3e-2": {"entropy_coef": 3e-2},
+    "ent3e-3": {"entropy_coef": 3e-3},
+    "entlin": {"entropy_schedule": "linear"},
     "shape": {"distance_shaping": 1.0},
     "lagrange": {"value_norm": True, "split_rewards": True, "constrain_collisions": True},
     "lagrange10": {

@@ -123,20 +123,31 @@ def test_cli_config_error_is_one_line_without_traceback():
     assert "key 'size'" in proc.stderr
 
 
-def test_entropy_coef_is_resolved_by_the_evader_and_an_explicit_value_wins() -> None:
-    from a2cm_phys.config import ENTROPY_COEF, preset, resolve_train
+def test_entropy_is_resolved_by_the_game_and_an_explicit_value_wins() -> None:
+    from a2cm_phys.config import ENTROPY, preset, resolve_train
 
     unset = load_train()
-    assert unset.entropy_coef is None
-    for name in ("grid_vs", "phys_vs"):  # discrete actions against a learned evader
-        assert resolve_train(load_scenario(name), unset).entropy_coef == ENTROPY_COEF["learned"]
-    for name in ("grid", "grid_collision", "phys", "phys_cont_vs", "phys_cont"):
-        assert resolve_train(load_scenario(name), unset).entropy_coef == ENTROPY_COEF["scripted"]
-    assert ENTROPY_COEF["scripted"] == preset("paper")["entropy_coef"]  # scripted: unchanged
-    chosen = load_train({"entropy_coef": 0.5})
-    assert resolve_train(load_scenario("grid_vs"), chosen).entropy_coef == 0.5
+    assert unset.entropy_coef is None and unset.entropy_schedule is None
+    games = {
+        "discrete": ("grid", "grid_collision", "grid_flee", "phys", "phys_collision"),
+        "self-play": ("grid_vs", "phys_vs"),
+        "continuous": ("phys_cont", "phys_cont_collision", "phys_cont_vs"),
+    }
+    for game, names in games.items():
+        for name in names:
+            cfg = resolve_train(load_scenario(name), unset)
+            assert (cfg.entropy_coef, cfg.entropy_schedule) == ENTROPY[game], name
+    assert ENTROPY["discrete"] == (0.03, "linear") and ENTROPY["self-play"][1] == "constant"
+    paper = load_train(preset("paper"))
+    assert resolve_train(load_scenario("grid_collision"), paper).entropy_coef == 1e-4
+    assert resolve_train(load_scenario("grid_collision"), paper).entropy_schedule == "constant"
+    chosen = load_train({"entropy_coef": 0.5, "entropy_schedule": "constant"})
+    assert resolve_train(load_scenario("grid"), chosen).entropy_coef == 0.5
+    assert resolve_train(load_scenario("grid"), chosen).entropy_schedule == "constant"
     with pytest.raises(ConfigError, match="entropy_coef"):
         load_train({"entropy_coef": -1.0})
+    with pytest.raises(ConfigError, match="entropy_schedule"):
+        load_train({"entropy_schedule": "cosine"})
 
 
 def test_updates_are_resolved_by_the_control_type_and_an_explicit_value_wins() -> None:

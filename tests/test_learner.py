@@ -309,6 +309,25 @@ def test_loss_and_gradients_match_a_float64_reference(algo: str) -> None:
             torch.testing.assert_close(p.grad.double(), ref_grads[name], rtol=1e-5, atol=1e-6)
 
 
+def test_the_linear_entropy_schedule_weighs_entropy_by_the_run_left() -> None:
+    """At progress p the loss and gradients are those of the coefficient 0.05 · (1 − p)."""
+    for progress in (0.0, 0.25, 0.9):
+        m, batch = model("a2cm", seed=1, hidden=16), trainer_batch(seed=1)
+        annealed = paper_cfg(entropy_coef=0.05, entropy_schedule="linear")
+        ref_metrics, ref_grads = reference_loss(
+            m, batch, paper_cfg(entropy_coef=0.05 * (1.0 - progress))
+        )
+        metrics = Learner(m, annealed).update(batch, progress=progress)
+        assert metrics == pytest.approx(ref_metrics, rel=1e-5, abs=1e-6)
+        for name, p in m.named_parameters():
+            torch.testing.assert_close(p.grad.double(), ref_grads[name], rtol=1e-5, atol=1e-6)
+    # constant: progress changes nothing
+    m, batch = model("a2cm", seed=1, hidden=16), trainer_batch(seed=1)
+    ref_metrics, _ = reference_loss(m, batch, paper_cfg(entropy_coef=0.05))
+    metrics = Learner(m, paper_cfg(entropy_coef=0.05)).update(batch, progress=0.9)
+    assert metrics == pytest.approx(ref_metrics, rel=1e-5, abs=1e-6)
+
+
 # --------------------------------------------------------------------- continuous actions
 def gaussian_model(algo: str, seed: int = 0, hidden: int = 16) -> ActorCritic:
     """A small seeded model with diagonal-Gaussian actors over a 2-D command."""

@@ -157,7 +157,7 @@ def test_runs_written_before_the_options_read_as_without_them():
     from a2cm_phys.config import resolve_train, stored_train
 
     old = {k: v for k, v in dataclasses.asdict(Train()).items()}
-    for key in ("distance_shaping", "mean_bound_coef", "pool_every"):
+    for key in ("distance_shaping", "mean_bound_coef", "pool_every", "entropy_schedule"):
         del old[key]
     old["log_std_init"] = 0.0  # stored explicitly by then
     old["entropy_coef"] = 1e-4  # every stored run has its value
@@ -165,4 +165,6 @@ def test_runs_written_before_the_options_read_as_without_them():
     filled = stored_train(old)
     assert filled["distance_shaping"] == 0.0 and filled["mean_bound_coef"] == 0.0
     assert filled["pool_every"] == Train().pool_every
-    assert load_train(filled, "old run") == resolve_train(load_scenario("grid"), Train())
+    assert filled["entropy_schedule"] == "constant"  # every run before it had a constant one
+    before = Train(entropy_coef=1e-4, entropy_schedule="constant")
+    assert load_train(filled, "old run") == resolve_train(load_scenario("grid"), before)

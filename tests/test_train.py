@@ -58,13 +58,13 @@ def _assert_same_run(a: Path, b: Path) -> None:
 # one with an uninterrupted run needs a constant schedule (a resume at the same length
 # is exact either way).
 GRID = ("--scenario", "grid", "--num-envs", "4", "--batch-size", "32", "--seed", "3")
-CONSTANT_LR = ("--set", "train.lr_schedule=constant")
+CONSTANT_SCHEDULES = ("--set", "train.lr_schedule=constant", "train.entropy_schedule=constant")
 
 
 def test_resume_reproduces_uninterrupted_run(tmp_path: Path) -> None:
-    code, full = _run(tmp_path / "a", *GRID, *CONSTANT_LR, "--updates", "20")
+    code, full = _run(tmp_path / "a", *GRID, *CONSTANT_SCHEDULES, "--updates", "20")
     assert code == 0
-    code, part = _run(tmp_path / "b", *GRID, *CONSTANT_LR, "--updates", "10")
+    code, part = _run(tmp_path / "b", *GRID, *CONSTANT_SCHEDULES, "--updates", "10")
     assert code == 0 and checkpoint.load(part)["update"] == 10
     assert main(["--resume", str(part), "--updates", "20", "--no-progress"]) == 0
     _assert_same_run(full, part)

@@ -21,7 +21,8 @@ one per agent: the only difference). An update is a sequence of small pieces:
    · (collisions per step − budget)`` after each batch): it starts at 0, so the team first
    learns to catch, and rises only as long as collisions happen;
 4. **loss** ``Σ_i [−mean(A_i · log π_i(a_i|s)) − entropy_coef · H(π_i)] + value_coef ·
-   Σ_c MSE_c`` (critics regress their normalised targets), plus for Gaussian actors
+   Σ_c MSE_c`` (critics regress their normalised targets; ``entropy_coef`` annealed
+   linearly to 0 when ``entropy_schedule = "linear"``), plus for Gaussian actors
    ``mean_bound_coef`` times a soft bound on their means (:func:`mean_bound_loss`), and one
    optimiser step (RMSprop as Keras has it, the paper's, or Adam), with optional gradient
    clipping.
@@ -43,7 +44,8 @@ import torch
 
 from a2cm_phys.algos.normalize import ValueNorm
 from a2cm_phys.algos.returns import gae
-from a2cm_phys.config import ENTROPY_COEF
+from a2cm_phys.algos.rmsprop import KerasRMSprop
+from a2cm_phys.config import PRESETS
 
 if TYPE_CHECKING:
     from a2cm_phys.algos.models import ActorCritic
@@ -85,12 +87,12 @@ class NonFiniteLoss(FloatingPointError):
         self.metrics = metrics
 
 
-def make_optimizer(model: torch.nn.Module, cfg: Train) -> torch.optim.Optimizer:
+def make_optimizer(model: torch.nn.Module, cfg: Train) -> torch.optim.Optimizer | KerasRMSprop:
     """RMSprop as the paper's Keras has it (non-centred, no momentum, eps outside the
-    square root: torch's RMSprop with ``alpha = rho``), or Adam."""
+    square root: torch's RMSprop with ``alpha = rho``, :mod:`.rmsprop`), or Adam."""
     if cfg.optimizer == "adam":
         return torch.optim.Adam(model.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
-    return torch.optim.RMSprop(
+    return KerasRMSprop(
         model.parameters(), lr=cfg.lr, alpha=cfg.rmsprop_alpha, eps=cfg.rmsprop_eps
     )
 
@@ -117,8 +119,8 @@ class Learner:
     ) -> None:
         self.model = model
         self.cfg = train_cfg
-        entropy = train_cfg.entropy_coef  # None: unresolved (no scenario), the usual value
-        self.entropy_coef = ENTROPY_COEF["scripted"] if entropy is None else entropy
+        entropy = train_cfg.entropy_coef  # None: unresolved (no scenario), the paper's value
+        self.entropy_coef = PRESETS["paper"]["entropy_coef"] if entropy is None else entropy
         self.shaping = shaping
         self.optimizer = make_optimizer(model, train_cfg)
         self.device = next(model.parameters()).device
@@ -139,7 +141,8 @@ class Learner:
                 ``terminated``/``truncated (T,B)`` bool, ``final_obs (T,B,obs_dim)`` (only
                 read where truncated), ``next_obs (B,obs_dim)``.
             progress: the fraction of the run done before this update, in ``[0, 1)``: the
-                learning rate is ``lr · (1 − progress)`` when ``lr_schedule = "linear"``.
+                learning rate is ``lr · (1 − progress)`` when ``lr_schedule = "linear"``,
+                and the entropy coefficient likewise under ``entropy_schedule``.
 
         Returns:
             ``policy_loss`` (Σ over agents), ``value_loss`` (Σ over critics and components
@@ -206,7 +209,10 @@ class Learner:
         policy_loss = -(actor_adv * log_prob).mean(dim=(0, 1)).sum()
         entropy_sum = entropy.mean(dim=(0, 1)).sum()
         value_loss = (targets - out).pow(2).mean(dim=(0, 1)).sum()
-        loss = policy_loss - self.entropy_coef * entropy_sum + cfg.value_coef * value_loss
+        entropy_coef = self.entropy_coef
+        if cfg.entropy_schedule == "linear":  # None: unresolved, the paper's constant
+            entropy_coef *= 1.0 - progress
+        loss = policy_loss - entropy_coef * entropy_sum + cfg.value_coef * value_loss
         if model.log_std is not None and cfg.mean_bound_coef:  # None (unresolved): off
             loss = loss + cfg.mean_bound_coef * mean_bound_loss(dist_out)
 
