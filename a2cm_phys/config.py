@@ -181,13 +181,15 @@ class Scenario:
 class Train:
     """Training settings (SPEC §6).
 
-    The paper's hyperparameters are kept (RMSprop 7e-3 as Keras has it, γ 0.99, entropy
-    1e-4, batch 128, 5,000 updates, 128 hidden units); what is ours, chosen by the ablation
-    in ``BENCHMARKS.md`` so that the collision scenarios are learned: 16 games, the reward
+    The paper's hyperparameters are kept (RMSprop 7e-3 as Keras has it, γ 0.99, batch 128,
+    5,000 updates, 128 hidden units); what is ours, chosen by the ablation in
+    ``BENCHMARKS.md`` so that the collision scenarios are learned: 16 games, the reward
     split into its time and collision components, each valued by its own critic output
     under PopArt normalisation and weighed on its own scale (``split_rewards``,
-    ``value_norm``, ``balance_rewards``), advantages normalised per batch, and a linear
-    learning-rate anneal. ``--preset paper`` (:data:`PRESETS`) is the paper's exact method.
+    ``value_norm``, ``balance_rewards``), advantages normalised per batch, a linear
+    learning-rate anneal, and with discrete actions an entropy coefficient of 0.03 instead
+    of 1e-4, annealed with the learning rate against a scripted evader (:data:`ENTROPY`).
+    ``--preset paper`` (:data:`PRESETS`) is the paper's exact method.
     Keys left ``None`` take their scenario's value in :func:`resolve_train` (the number of
     updates, for one: continuous control needs 2,000,000 steps, :data:`CONTROL_DEFAULTS`).
     """
@@ -581,7 +583,7 @@ ENTROPY: dict[str, tuple[float, Schedule]] = {
   optimum (3.41 steps); annealed 0.03 explores while the collision penalty is learned and
   ends near-greedy: 2.93–2.94 steps, the optimum, with no collision, for every seed of
   A2C and A2CM in both collision scenarios, and ``grid_flee`` from 57.5 to 6.1 steps
-  (5 seeds, ``BENCHMARKS.md``, "Entropy").
+  (5 seeds; ``BENCHMARKS.md``, "The entropy coefficient and its schedule").
 - ``self-play`` (discrete actions, learned evader): 0.03 for both teams, constant. Under
   1e-4 both actors turned near-deterministic, so each was exploited by the other's next
   policy: over 5 seeds (A2CM, means) 0.03 took the pursuers from 12.9 to 3.65 steps

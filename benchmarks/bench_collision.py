@@ -47,8 +47,10 @@ PIECES: dict[str, dict[str, Any]] = {
     "cw.3": {"collision_weight": 0.3},
     "ent0": {"entropy_coef": 0.0},
     "ent3e-2": {"entropy_coef": 3e-2},
-    "ent3e-3": {"entropy_coef": 3e-3},
     "entlin": {"entropy_schedule": "linear"},
+    "entconst": {"entropy_schedule": "constant"},
+    # the defaults before the entropy schedule: `ours+ent1e-4` is the "ours" of older rows
+    "ent1e-4": {"entropy_coef": 1e-4, "entropy_schedule": "constant"},
     "shape": {"distance_shaping": 1.0},
     "lagrange": {"value_norm": True, "split_rewards": True, "constrain_collisions": True},
     "lagrange10": {
