@@ -5,7 +5,7 @@ Keras' RMSprop (non-centred, no momentum, ``eps`` outside the square root) is
 operations of torch's single-tensor implementation, in the same order, so every step is
 bit-identical to it (``tests/test_rmsprop.py``), and reads and writes torch's
 ``state_dict`` layout, so checkpoints move between the two. Why not torch.optim itself: the
-first use of any ``torch.optim.Optimizer`` imports ``torch._dynamo`` (about 1.3 s of the
+first use of any ``torch.optim.Optimizer`` imports ``torch._dynamo`` (1.3–1.75 s of the
 main job's 30) and each ``step`` passes through profiling and hook wrappers (about 110 µs
 of an update's 2.7 ms); the main job takes 5,000 steps (``BENCHMARKS.md``, "The main
 job's time"). Adam stays torch.optim's.
