@@ -20,25 +20,9 @@ import argparse
 import numpy as np
 
 from a2cm_phys.oracle import load_or_solve
-from a2cm_phys.solve.evaluate import evaluate_policy, policy_chain
+from a2cm_phys.solve.evaluate import evaluate_policy, policy_chain, state_visits
 from a2cm_phys.solve.sources import load_run
 from a2cm_phys.solve.tables import model_table, start_state
-
-
-def visits_from(chain, start: int, max_steps: int = 1000, eps: float = 1e-14) -> np.ndarray:
-    """Expected visits of every state within ``max_steps`` steps from ``start``."""
-    visits = np.zeros(len(chain.next))
-    idx, mass = np.array([start]), np.array([1.0])
-    for _ in range(max_steps):
-        visits[idx] += mass
-        flow = (mass[:, None] * chain.cont[idx]).ravel()
-        target = chain.next[idx].ravel()
-        live = flow > eps
-        idx, inverse = np.unique(target[live], return_inverse=True)
-        mass = np.bincount(inverse, weights=flow[live])
-        if mass.sum() < eps:
-            break
-    return visits
 
 
 def main() -> None:
@@ -57,7 +41,7 @@ def main() -> None:
     steps = evaluate_policy(chain, np.ones(grid.n_states), skip=~grid.valid())
     start = start_state(scenario)
     optimum = solution.steps
-    visits = visits_from(chain, start, scenario.max_steps)
+    visits = state_visits(chain, start, scenario.max_steps)
     q = 1.0 + np.einsum("sb,sb->s", chain.cont, np.nan_to_num(optimum)[chain.next])
     loss = visits * (q - optimum)
     print(f"greedy {steps[start]:.4f} steps, optimum {optimum[start]:.4f}: "

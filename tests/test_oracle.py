@@ -17,7 +17,7 @@ from a2cm_phys.config import Scenario, load_scenario
 from a2cm_phys.envs.evader import STAY, flee_actions
 from a2cm_phys.envs.grid import GridCore, GridRules
 from a2cm_phys.oracle import OraclePolicy, load_or_solve, main
-from a2cm_phys.solve import GridModel, TooLargeError, solve_dp
+from a2cm_phys.solve import GridModel, TooLargeError, solve_dp, state_visits
 
 
 def grid(**overrides) -> Scenario:
@@ -248,6 +248,22 @@ def test_monte_carlo_in_grid_core_matches_expectation(evader: str) -> None:
     sd = np.sqrt(law.capture @ (k - mean) ** 2)
     assert abs(length.mean() - mean) < 4 * sd / np.sqrt(episodes)
     assert np.all(length <= k[-1])
+
+
+@pytest.mark.parametrize("max_steps", [1000, 3])
+def test_state_visits_sum_to_the_expected_length(max_steps: int) -> None:
+    """Each step visits one state: the visits sum to E[min(length, max_steps)], the mean of
+    the exact law, and from the start they equal the optimum's expected steps."""
+    sc = grid(size=3, pursuers=2, max_steps=max_steps)
+    sol = load_or_solve(sc, use_cache=False)
+    start = int(sol.index(sol.start_positions()))
+    visits = state_visits(sol.chain, start, max_steps)
+    assert visits[start] == 1.0 and visits.min() == 0.0
+    assert visits.sum() == pytest.approx(sol.distribution().mean_length(), rel=1e-12)
+    if max_steps == 1000:
+        assert visits.sum() == pytest.approx(sol.steps[start], rel=1e-9)
+    else:
+        assert visits.sum() < sol.steps[start]
 
 
 def test_act_decodes_observations() -> None:

@@ -24,7 +24,13 @@ from .best_response import (
     pursuers_best_response,
 )
 from .dp import DPResult, solve_dp
-from .evaluate import PolicyChain, capture_distribution, evaluate_policy, policy_chain
+from .evaluate import (
+    PolicyChain,
+    capture_distribution,
+    evaluate_policy,
+    policy_chain,
+    state_visits,
+)
 from .model import GridModel, TooLargeError, UnsupportedError
 from .tables import (
     TablePolicy,
@@ -55,5 +61,6 @@ __all__ = [
     "pursuers_best_response",
     "scripted_evader_table",
     "solve_dp",
+    "state_visits",
     "uniform_table",
 ]

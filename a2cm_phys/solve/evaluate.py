@@ -3,12 +3,14 @@
 :func:`policy_chain` applies :meth:`~a2cm_phys.envs.grid.GridRules.apply` to every state
 and every evader move under the policy, giving the Markov chain the policy induces; it is
 independent of the factorised backup of :mod:`.model`, so evaluating the greedy policy on
-it cross-checks the value iteration. :func:`capture_distribution` propagates the state
-distribution from a start state to the exact law of the episode length.
+it cross-checks the value iteration. :func:`propagate` pushes the state distribution from
+a start state through the chain: :func:`capture_distribution` turns it into the exact law
+of the episode length, :func:`state_visits` into each state's expected visits.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -125,15 +127,22 @@ class CaptureDistribution:
         return float(hit[0] + 1) if len(hit) else float("inf")
 
 
-def capture_distribution(
-    chain: PolicyChain, start: int, max_steps: int, eps: float = 1e-15
-) -> CaptureDistribution:
-    """Propagate the state distribution from state ``start`` for up to ``max_steps`` steps."""
+def propagate(
+    chain: PolicyChain,
+    start: int,
+    max_steps: int,
+    visit: Callable[[np.ndarray, np.ndarray], None],
+    eps: float = 1e-15,
+) -> float:
+    """Push the state distribution from state ``start`` through ``chain``, step by step.
+
+    ``visit(states, mass)`` sees each step's distribution before the step is taken (unique
+    state indices and their probabilities), for up to ``max_steps`` steps or until less than
+    ``eps`` of the mass is still running. Returns the mass still running at the end.
+    """
     idx, mass = np.array([start]), np.array([1.0])
-    capture, collision = [], []
     for _ in range(max_steps):
-        capture.append(float(mass @ chain.p_capture[idx]))
-        collision.append(float(mass @ chain.p_collision_end[idx]))
+        visit(idx, mass)
         flow = (mass[:, None] * chain.cont[idx]).ravel()
         target = chain.next[idx].ravel()
         live = flow > 0
@@ -141,4 +150,30 @@ def capture_distribution(
         mass = np.bincount(inverse, weights=flow[live], minlength=len(idx))
         if mass.sum() < eps:
             break
-    return CaptureDistribution(np.array(capture), np.array(collision), float(mass.sum()))
+    return float(mass.sum())
+
+
+def capture_distribution(
+    chain: PolicyChain, start: int, max_steps: int, eps: float = 1e-15
+) -> CaptureDistribution:
+    """The law of the episode's end from state ``start`` (:func:`propagate`)."""
+    capture, collision = [], []
+
+    def visit(idx: np.ndarray, mass: np.ndarray) -> None:
+        capture.append(float(mass @ chain.p_capture[idx]))
+        collision.append(float(mass @ chain.p_collision_end[idx]))
+
+    left = propagate(chain, start, max_steps, visit, eps)
+    return CaptureDistribution(np.array(capture), np.array(collision), left)
+
+
+def state_visits(chain: PolicyChain, start: int, max_steps: int) -> np.ndarray:
+    """Expected visits ``(S,)`` of every state within ``max_steps`` steps from ``start``
+    (they sum to the expected episode length, truncated at ``max_steps``)."""
+    visits = np.zeros(len(chain.next))
+
+    def visit(idx: np.ndarray, mass: np.ndarray) -> None:
+        visits[idx] += mass  # idx is unique
+
+    propagate(chain, start, max_steps, visit)
+    return visits
