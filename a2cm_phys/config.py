@@ -188,7 +188,8 @@ class Train:
     under PopArt normalisation and weighed on its own scale (``split_rewards``,
     ``value_norm``, ``balance_rewards``), advantages normalised per batch, a linear
     learning-rate anneal, and with discrete actions an entropy coefficient of 0.03 instead
-    of 1e-4, annealed with the learning rate against a scripted evader (:data:`ENTROPY`).
+    of 1e-4, annealed with the learning rate against a scripted evader (:data:`ENTROPY`),
+    and in continuous control progress shaping and gradient clipping (:data:`CONTROL_DEFAULTS`).
     ``--preset paper`` (:data:`PRESETS`) is the paper's exact method.
     Keys left ``None`` take their scenario's value in :func:`resolve_train` (the number of
     updates, for one: continuous control needs 2,000,000 steps, :data:`CONTROL_DEFAULTS`).
@@ -207,7 +208,7 @@ class Train:
     value_coef: float = 0.5
     hidden: int = 128
     reward_scale: float = 1.0
-    max_grad_norm: float = 0.0
+    max_grad_norm: float | None = None  # None: by the control type (CONTROL_DEFAULTS); 0: off
     device: str = "cpu"
     threads: int = 1
     workers: int = 1  # physics mode: processes stepping the games (grid ignores it)
@@ -225,10 +226,11 @@ class Train:
     # Continuous control (ours; None: the value for the scenario's control type, see
     # resolve_train): the Gaussians' initial log-std, a soft bound keeping their means
     # inside the command box (algos/learner.py), and progress shaping on the pursuers'
-    # distance to the evader (algos/shaping.py).
+    # distance to the evader and on the area of the evader's Voronoi cell (algos/shaping.py).
     log_std_init: float | None = None
     mean_bound_coef: float | None = None
     distance_shaping: float | None = None
+    area_shaping: float | None = None
     constrain_collisions: bool = False  # collisions as a constraint (Lagrange multiplier)
     collision_budget: float = 0.0
     lagrange_lr: float = 1.0
@@ -268,7 +270,7 @@ class Train:
         for key in ("collision_budget", "lagrange_lr", "collision_weight", "exploit_every"):
             if getattr(self, key) < 0:
                 raise _KeyError(key, f"must be >= 0, got {getattr(self, key)}")
-        for key in ("distance_shaping", "mean_bound_coef"):
+        for key in ("distance_shaping", "area_shaping", "mean_bound_coef"):
             value = getattr(self, key)
             if value is not None and not 0.0 <= value < float("inf"):
                 raise _KeyError(key, f"must be finite and >= 0, got {value}")
@@ -551,22 +553,35 @@ CONTROL_DEFAULTS: dict[str, dict[str, float]] = {
         "log_std_init": -0.5,
         "mean_bound_coef": 0.1,
         "distance_shaping": 1.0,
+        "area_shaping": 2.0,
+        "max_grad_norm": 0.5,
         "updates": 15_625,
     },
     "discrete": {
         "log_std_init": 0.0,
         "mean_bound_coef": 0.0,
         "distance_shaping": 0.0,
+        "area_shaping": 0.0,
+        "max_grad_norm": 0.0,
         "updates": 5000,
     },
 }
-"""The values :func:`resolve_train` gives unset :class:`Train` keys, per control type. In
-continuous control a −1 step reward at 10 Hz alone is not learned and unbounded Gaussian
-means run away (``BENCHMARKS.md``); discrete control keeps the paper's rewards (and these
-keys were added after runs whose stored configs lack them: they mean the discrete values).
-Updates: the paper's 5,000 (640,000 steps) in discrete control; 15,625 (2,000,000 steps,
-200,000 s of play at 10 Hz) in continuous control, where A2CM's Gaussian actors match
-``pursuit`` against the random evader (A2C: 1.12×; both 1.4–1.7× after 384,000 steps)."""
+"""The values :func:`resolve_train` gives unset :class:`Train` keys, per control type (the
+shaping weights per unit of the step cost, :func:`step_cost`). In continuous control a −1
+step reward at 10 Hz alone is not learned and unbounded Gaussian means run away
+(``BENCHMARKS.md``); discrete control keeps the paper's rewards (and these keys were added
+after runs whose stored configs lack them: they mean the discrete values).
+
+- Shaping (``algos/shaping.py``): the distance term alone let A2CM match ``pursuit``
+  against the random evader but never catch the fleeing one (8 runs of 10 never captured);
+  with the cell-area term (weight 2) every run of 10 catches it in every episode, 0.90× and
+  0.91× ``pursuit``'s time (A2C, A2CM; medians of 5 seeds), and against the random evader
+  A2C comes to 1.02× (was 1.12×), A2CM to 1.05× (was 1.00×).
+- Gradient clipping at norm 0.5: with the area term and no clipping one run in four
+  collapsed after learning to capture, never capturing again.
+- Updates: the paper's 5,000 (640,000 steps) in discrete control; 15,625 (2,000,000
+  steps, 200,000 s of play at 10 Hz) in continuous control (both algorithms 1.4–1.7×
+  ``pursuit`` after 384,000 steps)."""
 
 
 ENTROPY: dict[str, tuple[float, Schedule]] = {
@@ -603,12 +618,29 @@ def entropy_game(scenario: Scenario) -> str:
     return "self-play" if scenario.evader == "learned" else "discrete"
 
 
+SHAPING_KEYS = ("distance_shaping", "area_shaping")
+"""Shaping weights whose :data:`CONTROL_DEFAULTS` are per unit of the step cost."""
+
+
+def step_cost(scenario: Scenario) -> float:
+    """What a step costs the team, ``|rewards.step|`` (1 where a step is free): the unit of
+    the default shaping weights. The shaping pays in steps of travel, so a scenario whose
+    step costs 1,000 (the paper's collision experiments) gets weights 1,000 times larger:
+    shaping then weighs the same against the time cost in every scenario (measured: with
+    weights of 1 ``phys_cont_collision``'s teams took 1.6–2.8× pursuit's time, with 1,000
+    1.1–1.3×, ``BENCHMARKS.md``)."""
+    return abs(scenario.rewards.step) or 1.0
+
+
 def resolve_train(scenario: Scenario, cfg: Train) -> Train:
     """``cfg`` with its unset (None) keys given the values of ``scenario``'s control type
-    (:data:`CONTROL_DEFAULTS`) and game (:data:`ENTROPY`): what a run records and
-    its learner sees."""
+    (:data:`CONTROL_DEFAULTS`, the shaping weights times :func:`step_cost`) and game
+    (:data:`ENTROPY`): what a run records and its learner sees."""
     values = dict(CONTROL_DEFAULTS["continuous" if scenario.continuous else "discrete"])
     values["entropy_coef"], values["entropy_schedule"] = ENTROPY[entropy_game(scenario)]
+    cost = step_cost(scenario)
+    for key in SHAPING_KEYS:
+        values[key] *= cost
     unset = {k: v for k, v in values.items() if getattr(cfg, k) is None}
     return dataclasses.replace(cfg, **unset) if unset else cfg
 

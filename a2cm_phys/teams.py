@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from .algos import ActorCritic, Learner, make_model
-from .algos.shaping import DistanceShaping
+from .algos.shaping import ProgressShaping
 from .config import Scenario, Train, resolve_train
 from .rollout import allocate_batch, allocate_evader_batch
 
@@ -67,8 +67,10 @@ def make_teams(scenario: Scenario, cfg: Train) -> tuple[Team, Team | None]:
     return pursuers, Team("evader", emodel, learner, ebatch)
 
 
-def _shaping(scenario: Scenario, cfg: Train, sign: float = 1.0) -> DistanceShaping | None:
-    """The learner's distance shaping, if ``distance_shaping`` is on."""
-    if not cfg.distance_shaping:  # 0, or None (not resolved for a scenario: off)
+def _shaping(scenario: Scenario, cfg: Train, sign: float = 1.0) -> ProgressShaping | None:
+    """The learner's progress shaping, if ``distance_shaping`` or ``area_shaping`` is on
+    (None, not resolved for a scenario, is off)."""
+    distance, area = cfg.distance_shaping or 0.0, cfg.area_shaping or 0.0
+    if not (distance or area):
         return None
-    return DistanceShaping(scenario, cfg.distance_shaping, sign)
+    return ProgressShaping(scenario, distance, area, sign)

@@ -100,7 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=SEED)
     p.add_argument("--lr", type=float)
     p.add_argument("--reward-scale", type=float)
-    p.add_argument("--max-grad-norm", type=float, help="0 disables clipping")
+    p.add_argument(
+        "--max-grad-norm", type=float, help="0 disables clipping (0; continuous control: 0.5)"
+    )
     p.add_argument("--device", help="torch device: cpu (default), cuda, cuda:1, mps")
     p.add_argument("--threads", type=_COUNT, help="torch threads (default 1)")
     p.add_argument("--workers", type=_COUNT, help="physics: processes stepping the games (1)")

@@ -1,4 +1,5 @@
-"""What each piece of the learner buys on the collision scenarios (issue 12's ablation).
+"""What each piece of the learner buys (issue 12's ablation on the collision scenarios, issue
+13's on continuous control).
 
     python benchmarks/bench_collision.py --variants paper16,ours --seeds 0-4 \
         --scenarios grid_collision,grid_collision_continue [--algos a2cm,a2c] [--jobs 2]
@@ -52,6 +53,16 @@ PIECES: dict[str, dict[str, Any]] = {
     # the defaults before the entropy schedule: `ours+ent1e-4` is the "ours" of older rows
     "ent1e-4": {"entropy_coef": 1e-4, "entropy_schedule": "constant"},
     "shape": {"distance_shaping": 1.0},
+    # continuous control's progress shaping and clipping (issue 13): `ours+area0+noclip` is
+    # the "ours" of the runs before the cell-area term
+    "area0": {"area_shaping": 0.0},
+    "area1": {"area_shaping": 1.0},
+    "area2": {"area_shaping": 2.0},
+    "dist0": {"distance_shaping": 0.0},
+    "dist.5": {"distance_shaping": 0.5},
+    "noclip": {"max_grad_norm": 0.0},
+    "gamma.995": {"gamma": 0.995},
+    "gamma.999": {"gamma": 0.999},
     "lagrange": {"value_norm": True, "split_rewards": True, "constrain_collisions": True},
     "lagrange10": {
         "value_norm": True,

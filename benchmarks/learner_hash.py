@@ -5,7 +5,9 @@
 Trains six short runs (grid and physics, A2C and A2CM, continuous control, self-play; seed
 3, no log) and hashes every weight of every team and the optimiser's state. The entropy is
 pinned to the values the defaults had before the entropy schedule (1e-4 constant; 0.03 in
-self-play), so checkouts from before and after it compare. Equal hashes: the same floats.
+self-play), and the continuous run's cell-area shaping and gradient clipping to off (as
+before they existed), so checkouts from before and after them compare. Equal hashes: the
+same floats.
 """
 
 from __future__ import annotations
@@ -34,8 +36,12 @@ def options(name: str, updates: int, algo: str) -> dict:
     """The run's training options, the entropy pinned (and its schedule, where it exists)."""
     out = {"updates": updates, "seed": 3, "algo": algo}
     out["entropy_coef"] = 0.03 if name == "grid_vs" else 1e-4
-    if "entropy_schedule" in {f.name for f in dataclasses.fields(Train)}:
+    fields = {f.name for f in dataclasses.fields(Train)}
+    if "entropy_schedule" in fields:
         out["entropy_schedule"] = "constant"
+    out["max_grad_norm"] = 0.0
+    if "area_shaping" in fields:
+        out["area_shaping"] = 0.0
     return out
 
 

@@ -108,7 +108,7 @@ class Learner:
             ``normalize_advantages``, ``value_norm``, ``split_rewards``.
         shaping: optional shaping term ``shaping(batch) -> (T, B)`` added to the (first)
             reward component before scaling, e.g.
-            :class:`~a2cm_phys.algos.shaping.DistanceShaping`.
+            :class:`~a2cm_phys.algos.shaping.ProgressShaping`.
     """
 
     def __init__(
@@ -234,7 +234,7 @@ class Learner:
         model.zero_grad(set_to_none=True)  # the optimiser's own adds a profiler span
         loss.backward()
         params = [p for p in model.parameters() if p.grad is not None]
-        if cfg.max_grad_norm > 0:
+        if cfg.max_grad_norm:  # 0, or None (not resolved for a scenario): no clipping
             norm = torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
         else:
             norm = torch.nn.utils.get_total_norm([p.grad for p in params])
