@@ -318,6 +318,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "entropy_schedule": "constant",
         "constrain_collisions": False,
         "distance_shaping": 0.0,
+        "area_shaping": 0.0,
     },
 }
 """Named sets of :class:`Train` values (``--preset NAME``). ``paper`` is the paper's exact

@@ -164,3 +164,10 @@ def test_updates_are_resolved_by_the_control_type_and_an_explicit_value_wins() -
     assert resolve_train(load_scenario("phys_cont"), chosen).updates == 7
     with pytest.raises(ConfigError, match="updates"):
         load_train({"updates": 0})
+
+
+def test_paper_preset_has_no_shaping_and_no_clipping_in_continuous_control() -> None:
+    from a2cm_phys.config import preset, resolve_train
+
+    paper = resolve_train(load_scenario("phys_cont"), load_train(preset("paper")))
+    assert (paper.distance_shaping, paper.area_shaping, paper.max_grad_norm) == (0, 0, 0)
