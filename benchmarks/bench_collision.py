@@ -7,7 +7,8 @@
 A variant is ``ours`` (the defaults), or the paper's method (``--preset paper``) with 16
 games plus ``+``-separated pieces (``PIECES``), e.g. ``+split+advnorm+anneal``. Every run
 has 640,000 steps unless ``--steps`` says otherwise. A run is trained, then its greedy and
-sampled policies play ``--episodes`` evaluation episodes; a row gives medians over seeds of
+sampled policies play ``--episodes`` evaluation episodes (each run is printed, with the
+final Gaussian log-std and Lagrange multiplier); a row gives medians over seeds of
 the mean capture steps (greedy, sampled), the collisions per episode, the return relative
 to the reference's (raw reward) and the wall time, beside the reference: the exact optimum
 on grids, the better of the oracle driven in physics and pursuit in physics mode. Runs go
@@ -63,7 +64,15 @@ PIECES: dict[str, dict[str, Any]] = {
     "noclip": {"max_grad_norm": 0.0},
     "gamma.995": {"gamma": 0.995},
     "gamma.999": {"gamma": 0.999},
+    "ls1": {"log_std_init": 1.0},
+    "ls.5": {"log_std_init": 0.5},
+    "ls0": {"log_std_init": 0.0},
+    "ls-.5": {"log_std_init": -0.5},
+    "ls-1": {"log_std_init": -1.0},
     "lagrange": {"value_norm": True, "split_rewards": True, "constrain_collisions": True},
+    # the collision constraint with a budget (collisions per step, in training)
+    "lag2e-4": {"constrain_collisions": True, "collision_budget": 2e-4},
+    "lag5e-4": {"constrain_collisions": True, "collision_budget": 5e-4},
     "lagrange10": {
         "value_norm": True,
         "split_rewards": True,
@@ -122,6 +131,10 @@ def run(scenario: str, algo: str, variant: str, seed: int, steps: int, episodes:
         "sampled": float(sampled.lengths.mean()),
         "sampled_coll": float(sampled.collisions.mean()),
         "seconds": seconds,
+        "multiplier": trainer.learner.multiplier,  # the collision constraint's λ (0 without)
+        "log_std": (
+            None if trainer.model.log_std is None else float(trainer.model.log_std.detach().mean())
+        ),
     }
 
 
@@ -186,6 +199,8 @@ def main() -> int:
     ]
     with ProcessPoolExecutor(args.jobs) as pool:
         rows = list(pool.map(run, *zip(*jobs, strict=True)))
+    for r in rows:  # every run, for the record
+        print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items()})
     print("command: python benchmarks/bench_collision.py " + " ".join(sys.argv[1:]))
     print(
         "| scenario | algo | variant | seeds | greedy steps (median; all) | greedy collisions/ep"

@@ -202,7 +202,7 @@ def test_default_shaping_is_resolved_per_control_type(tmp_path):
     assert Train().distance_shaping is None and Train().area_shaping is None
     assert Train().max_grad_norm is None
     cont = resolve_train(load_scenario("phys_cont"), Train())
-    assert (cont.distance_shaping, cont.mean_bound_coef, cont.log_std_init) == (1.0, 0.1, -0.5)
+    assert (cont.distance_shaping, cont.mean_bound_coef, cont.log_std_init) == (1.0, 0.1, 0.5)
     assert (cont.area_shaping, cont.max_grad_norm) == (2.0, 0.5)
     grid = resolve_train(load_scenario("grid"), Train())
     assert (grid.distance_shaping, grid.mean_bound_coef, grid.log_std_init) == (0.0, 0.0, 0.0)
