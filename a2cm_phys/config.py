@@ -583,9 +583,9 @@ after runs whose stored configs lack them: they mean the discrete values).
 - The Gaussians' initial log-std 0.5 (σ ≈ 1.65: the first commands are clipped to the
   unit disc, near full speed in a random direction; the learned σ falls to 0.1–0.2).
   Against −0.5 (medians of 5 seeds, ratios to ``pursuit``'s capture time): on
-  ``phys_cont_collision`` A2CM 1.12× → 1.08× and A2C 1.16× → 1.08×, with the slow seeds
-  gone; on ``phys_cont_flee`` A2CM 0.91× → 0.84×, A2C 0.90× → 0.92×; on ``phys_cont``
-  A2CM 1.05× → 1.02×, A2C 1.02× → 1.05×.
+  ``phys_cont_collision`` A2CM 1.12× → 1.08× and A2C 1.16× → 1.08× (the slowest seeds
+  1.30× and 1.49× → 1.14× and 1.12×); on ``phys_cont_flee`` A2CM 0.91× → 0.84×, A2C
+  0.90× → 0.92×; on ``phys_cont`` A2CM 1.05× → 1.02×, A2C 1.02× → 1.05×.
 - Updates: the paper's 5,000 (640,000 steps) in discrete control; 15,625 (2,000,000
   steps, 200,000 s of play at 10 Hz) in continuous control (both algorithms 1.4–1.7×
   ``pursuit`` after 384,000 steps)."""
