@@ -573,11 +573,12 @@ step reward at 10 Hz alone is not learned and unbounded Gaussian means run away
 (``BENCHMARKS.md``); discrete control keeps the paper's rewards (and these keys were added
 after runs whose stored configs lack them: they mean the discrete values).
 
-- Shaping (``algos/shaping.py``): the distance term alone let A2CM match ``pursuit``
-  against the random evader but never catch the fleeing one (8 runs of 10 never captured);
-  with the cell-area term (weight 2) every run of 10 catches it in every episode, 0.90× and
-  0.91× ``pursuit``'s time (A2C, A2CM; medians of 5 seeds), and against the random evader
-  A2C comes to 1.02× (was 1.12×), A2CM to 1.05× (was 1.00×).
+- Shaping (``algos/shaping.py``; measured with ``log_std_init`` −0.5, the default then):
+  the distance term alone let A2CM match ``pursuit`` against the random evader but never
+  catch the fleeing one (8 runs of 10 never captured); with the cell-area term (weight 2)
+  every run of 10 catches it in every episode, 0.90× and 0.91× ``pursuit``'s time (A2C,
+  A2CM; medians of 5 seeds), and against the random evader A2C comes to 1.02× (was
+  1.12×), A2CM to 1.05× (was 1.00×).
 - Gradient clipping at norm 0.5: with the area term and no clipping one run in four
   collapsed after learning to capture, never capturing again.
 - The Gaussians' initial log-std 0.5 (σ ≈ 1.65: the first commands are clipped to the

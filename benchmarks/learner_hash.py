@@ -7,8 +7,7 @@ Trains six short runs (grid and physics, A2C and A2CM, continuous control, self-
 pinned to the values the defaults had before the entropy schedule (1e-4 constant; 0.03 in
 self-play), the continuous run's cell-area shaping and gradient clipping to off (as
 before they existed) and its initial log-std to −0.5 (its default until 2026-12-02), so
-checkouts from before and after them compare. Equal hashes: the
-same floats.
+checkouts from before and after them compare. Equal hashes: the same floats.
 """
 
 from __future__ import annotations
