@@ -189,7 +189,8 @@ class Train:
     ``value_norm``, ``balance_rewards``), advantages normalised per batch, a linear
     learning-rate anneal, and with discrete actions an entropy coefficient of 0.03 instead
     of 1e-4, annealed with the learning rate against a scripted evader (:data:`ENTROPY`),
-    and in continuous control progress shaping and gradient clipping (:data:`CONTROL_DEFAULTS`).
+    and in continuous control progress shaping and gradient clipping (:data:`CONTROL_DEFAULTS`),
+    with 32-step rollouts against the fleeing evader (:data:`FLEE_BATCH_SIZE`).
     ``--preset paper`` (:data:`PRESETS`) is the paper's exact method.
     Keys left ``None`` take their scenario's value in :func:`resolve_train` (the number of
     updates, for one: continuous control needs 2,000,000 steps, :data:`CONTROL_DEFAULTS`).
@@ -197,7 +198,7 @@ class Train:
 
     algo: Algo = "a2cm"
     updates: int | None = None  # None: by the control type (CONTROL_DEFAULTS, resolve_train)
-    batch_size: int = 128
+    batch_size: int | None = None  # None: 128, or 512 by the game (resolve_train)
     num_envs: int = 16  # ours; the paper played one game (--preset paper, --num-envs 1)
     seed: int = 0
     lr: float = 7e-3
@@ -245,7 +246,7 @@ class Train:
         for key in ("updates", "batch_size", "num_envs", "hidden", "threads", "workers"):
             if getattr(self, key) is not None and getattr(self, key) < 1:
                 raise _KeyError(key, f"must be >= 1, got {getattr(self, key)}")
-        if self.batch_size % self.num_envs:
+        if self.batch_size is not None and self.batch_size % self.num_envs:
             raise _KeyError(
                 "batch_size",
                 f"{self.batch_size} is not a multiple of num_envs={self.num_envs}",
@@ -291,7 +292,8 @@ class Train:
 
     @property
     def steps_per_env(self) -> int:
-        """Rollout length per environment in one update."""
+        """Rollout length per environment in one update (of a config from
+        :func:`resolve_train`, where ``batch_size`` is set)."""
         return self.batch_size // self.num_envs
 
 
@@ -358,7 +360,7 @@ def check_limits(obj: Any, limits: Mapping[str, tuple[int, str]]) -> None:
     """Raise ``ValueError`` naming the key of the first value above its limit, or (for a
     scenario) a ``name`` that is not a plain file name (run directories are named after it)."""
     for key, (limit, why) in limits.items():
-        if getattr(obj, key) > limit:
+        if getattr(obj, key) is not None and getattr(obj, key) > limit:
             raise _KeyError(key, f"must be at most {limit:,} ({why}), got {getattr(obj, key):,}")
     name = getattr(obj, "name", None)
     if name is not None and (not name or name[0] == "." or set(name) & set("/\\\0")):
@@ -556,7 +558,8 @@ CONTROL_DEFAULTS: dict[str, dict[str, float]] = {
         "distance_shaping": 1.0,
         "area_shaping": 2.0,
         "max_grad_norm": 0.5,
-        "updates": 15_625,
+        "batch_size": 128,
+        "steps": 2_000_000,  # the budget: updates = steps // batch_size
     },
     "discrete": {
         "log_std_init": 0.0,
@@ -564,6 +567,7 @@ CONTROL_DEFAULTS: dict[str, dict[str, float]] = {
         "distance_shaping": 0.0,
         "area_shaping": 0.0,
         "max_grad_norm": 0.0,
+        "batch_size": 128,
         "updates": 5000,
     },
 }
@@ -587,9 +591,23 @@ after runs whose stored configs lack them: they mean the discrete values).
   ``phys_cont_collision`` A2CM 1.12× → 1.08× and A2C 1.16× → 1.08× (the slowest seeds
   1.30× and 1.49× → 1.14× and 1.12×); on ``phys_cont_flee`` A2CM 0.91× → 0.84×, A2C
   0.90× → 0.92×; on ``phys_cont`` A2CM 1.05× → 1.02×, A2C 1.02× → 1.05×.
-- Updates: the paper's 5,000 (640,000 steps) in discrete control; 15,625 (2,000,000
-  steps, 200,000 s of play at 10 Hz) in continuous control (both algorithms 1.4–1.7×
-  ``pursuit`` after 384,000 steps)."""
+- Updates: the paper's 5,000 of 128 steps (640,000 steps) in discrete control; in
+  continuous control a budget of 2,000,000 steps (200,000 s of play at 10 Hz; both
+  algorithms were 1.4–1.7× ``pursuit`` after 384,000), ``steps // batch_size`` updates:
+  15,625 of 128 steps, 3,906 of 512 against the fleeing evader (:data:`FLEE_BATCH_SIZE`)."""
+
+
+FLEE_BATCH_SIZE = 512
+"""``Train.batch_size`` when unset in continuous control against the scripted fleeing
+evader (elsewhere 128): 32-step rollouts in the 16 games, so the returns carry a trap's
+credit over most of the ~30 steps it takes (with ``gae_lambda`` 1), where 8-step ones
+bootstrap on the critic after 8. That evader is deterministic but for a small seeded turn
+of its candidate headings, so the long returns add little variance; A2CM (5 seeds) then
+catches it 0.77× ``pursuit``'s time, every seed at 0.77–0.80× (0.84× with 8 steps, two
+seeds of five finding the three-pursuer wall trap). Against the random evader the long
+returns carry its randomness: on ``phys_cont`` A2CM and A2C came to 1.06× ``pursuit``
+(1.02× and 1.05× with 8 steps), so the other scenarios keep 128 (``BENCHMARKS.md``,
+"Rollouts of 32 steps against the fleeing evader")."""
 
 
 ENTROPY: dict[str, tuple[float, Schedule]] = {
@@ -642,14 +660,27 @@ def step_cost(scenario: Scenario) -> float:
 
 def resolve_train(scenario: Scenario, cfg: Train) -> Train:
     """``cfg`` with its unset (None) keys given the values of ``scenario``'s control type
-    (:data:`CONTROL_DEFAULTS`, the shaping weights times :func:`step_cost`) and game
-    (:data:`ENTROPY`): what a run records and its learner sees."""
+    (:data:`CONTROL_DEFAULTS`, the shaping weights times :func:`step_cost`, continuous
+    control's updates from its step budget) and game (:data:`ENTROPY`,
+    :data:`FLEE_BATCH_SIZE`): what a run records and its learner sees. A default batch that
+    ``cfg.num_envs`` does not divide is a :class:`ConfigError` naming ``batch_size``."""
     values = dict(CONTROL_DEFAULTS["continuous" if scenario.continuous else "discrete"])
     values["entropy_coef"], values["entropy_schedule"] = ENTROPY[entropy_game(scenario)]
     cost = step_cost(scenario)
     for key in SHAPING_KEYS:
         values[key] *= cost
+    if scenario.continuous and scenario.evader == "flee":
+        values["batch_size"] = FLEE_BATCH_SIZE
+    batch = values["batch_size"] if cfg.batch_size is None else cfg.batch_size
+    if "steps" in values:
+        values["updates"] = values.pop("steps") // batch
     unset = {k: v for k, v in values.items() if getattr(cfg, k) is None}
+    if "batch_size" in unset and unset["batch_size"] % cfg.num_envs:
+        raise ConfigError(
+            f"training options: key 'batch_size': this scenario's default of"
+            f" {unset['batch_size']} is not a multiple of num_envs={cfg.num_envs}; set"
+            " batch_size too"
+        )
     return dataclasses.replace(cfg, **unset) if unset else cfg
 
 

@@ -94,9 +94,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--algo", choices=["a2cm", "a2c"])
     p.add_argument("--num-envs", type=_COUNT, help="parallel games (1 = the paper's setting)")
     p.add_argument(
-        "--updates", type=_COUNT, help="gradient updates (5000; continuous control: 15,625)"
+        "--updates",
+        type=_COUNT,
+        help="gradient updates (5000; continuous control: 2,000,000 steps' worth)",
     )
-    p.add_argument("--batch-size", type=_COUNT, help="steps per update over all games (128)")
+    p.add_argument(
+        "--batch-size",
+        type=_COUNT,
+        help="steps per update over all games (128; continuous, fleeing evader: 512)",
+    )
     p.add_argument("--seed", type=SEED)
     p.add_argument("--lr", type=float)
     p.add_argument("--reward-scale", type=float)

@@ -31,6 +31,7 @@ PIECES: dict[str, dict[str, Any]] = {
     "split": {"value_norm": True, "split_rewards": True},
     "splitraw": {"value_norm": True, "split_rewards": True, "balance_rewards": False},
     "gae": {"gae_lambda": 0.95},
+    "gae.9": {"gae_lambda": 0.9},
     "adam": {"optimizer": "adam", "lr": 1e-3},
     "adam3e-3": {"optimizer": "adam", "lr": 3e-3},
     "b256": {"num_envs": 32, "batch_size": 256},
@@ -61,6 +62,13 @@ PIECES: dict[str, dict[str, Any]] = {
     "area2": {"area_shaping": 2.0},
     "dist0": {"distance_shaping": 0.0},
     "dist.5": {"distance_shaping": 0.5},
+    "dist2": {"distance_shaping": 2.0},
+    "area4": {"area_shaping": 4.0},
+    "h256": {"hidden": 256},
+    "n16": {"batch_size": 256},  # 16-step rollouts (16 games)
+    "n32": {"batch_size": 512},  # 32-step rollouts
+    "n64": {"batch_size": 1024},  # 64-step rollouts
+    "env32": {"num_envs": 32},  # 4-step rollouts (32 games)
     "noclip": {"max_grad_norm": 0.0},
     "gamma.995": {"gamma": 0.995},
     "gamma.999": {"gamma": 0.999},
@@ -103,15 +111,15 @@ def run(scenario: str, algo: str, variant: str, seed: int, steps: int, episodes:
     """Train one run and evaluate it; returns a row of figures."""
     import torch
 
-    from a2cm_phys.config import load_scenario, load_train
+    from a2cm_phys.config import load_scenario, load_train, resolve_train
     from a2cm_phys.evaluate import model_policy, play
     from a2cm_phys.train import Trainer
 
     torch.set_num_threads(1)
     options = variant_options(variant)
-    batch = options.get("batch_size", load_train(options).batch_size)
-    cfg = load_train({**options, "algo": algo, "seed": seed, "updates": steps // batch})
     sc = load_scenario(scenario)
+    batch = resolve_train(sc, load_train(options)).batch_size
+    cfg = load_train({**options, "algo": algo, "seed": seed, "updates": steps // batch})
     with tempfile.TemporaryDirectory() as tmp:
         trainer = Trainer(sc, cfg, tmp, record=False)
         start = time.perf_counter()

@@ -23,6 +23,7 @@ CASES = [
     ("train", ["--num-envs", "0"], "--num-envs"),
     ("train", ["--num-envs", BIG], "num_envs"),
     ("train", ["--batch-size", BIG], "batch_size"),
+    ("train", ["--scenario", "phys_cont_flee", "--num-envs", "48"], "default of 512"),
     ("train", ["--threads", "100000"], "threads"),
     ("train", ["--log-every", "-1"], "--log-every"),
     ("train", ["--scene-every", "-1"], "--scene-every"),

@@ -159,11 +159,28 @@ def test_updates_are_resolved_by_the_control_type_and_an_explicit_value_wins() -
         assert resolve_train(load_scenario(name), unset).updates == preset("paper")["updates"]
     for name in ("phys_cont", "phys_cont_flee", "phys_cont_vs"):
         resolved = resolve_train(load_scenario(name), unset)
-        assert resolved.updates * resolved.batch_size == 2_000_000
+        assert 0 <= 2_000_000 - resolved.updates * resolved.batch_size < resolved.batch_size
     chosen = load_train({"updates": 7})
     assert resolve_train(load_scenario("phys_cont"), chosen).updates == 7
     with pytest.raises(ConfigError, match="updates"):
         load_train({"updates": 0})
+
+
+def test_batch_size_is_resolved_by_the_control_type_and_checked_against_num_envs() -> None:
+    from a2cm_phys.config import resolve_train
+
+    assert load_train().batch_size is None
+    for name in ("grid", "phys", "phys_cont", "phys_cont_collision", "phys_cont_vs"):
+        assert resolve_train(load_scenario(name), load_train()).batch_size == 128, name
+    resolved = resolve_train(load_scenario("phys_cont_flee"), load_train())
+    assert (resolved.batch_size, resolved.steps_per_env, resolved.updates) == (512, 32, 3906)
+    # an explicit batch wins, and continuous control's updates keep its step budget
+    chosen = resolve_train(load_scenario("phys_cont_flee"), load_train({"batch_size": 64}))
+    assert (chosen.batch_size, chosen.updates) == (64, 31_250)
+    # 512 is no multiple of 48: the error names the key and the default, before any run
+    with pytest.raises(ConfigError, match=r"'batch_size'.*default of 512.*num_envs=48"):
+        resolve_train(load_scenario("phys_cont_flee"), load_train({"num_envs": 48}))
+    assert resolve_train(load_scenario("phys_cont"), load_train({"num_envs": 32})).updates == 15_625
 
 
 def test_paper_preset_has_no_shaping_and_no_clipping_in_continuous_control() -> None:

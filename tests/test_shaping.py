@@ -263,6 +263,7 @@ def test_runs_written_before_the_options_read_as_without_them():
     old["max_grad_norm"] = 0.0  # likewise (a plain number before it could be unset)
     old["entropy_coef"] = 1e-4  # every stored run has its value
     old["updates"] = 5000  # likewise
+    old["batch_size"] = 128  # likewise
     filled = stored_train(old)
     assert filled["distance_shaping"] == 0.0 and filled["mean_bound_coef"] == 0.0
     assert filled["area_shaping"] == 0.0
