@@ -190,7 +190,8 @@ class Train:
     learning-rate anneal, and with discrete actions an entropy coefficient of 0.03 instead
     of 1e-4, annealed with the learning rate against a scripted evader (:data:`ENTROPY`),
     and in continuous control progress shaping and gradient clipping (:data:`CONTROL_DEFAULTS`),
-    with 32-step rollouts against the fleeing evader (:data:`FLEE_BATCH_SIZE`).
+    with 32-step rollouts and twice the steps against the fleeing evader
+    (:data:`FLEE_DEFAULTS`).
     ``--preset paper`` (:data:`PRESETS`) is the paper's exact method.
     Keys left ``None`` take their scenario's value in :func:`resolve_train` (the number of
     updates, for one: continuous control needs 2,000,000 steps, :data:`CONTROL_DEFAULTS`).
@@ -594,20 +595,26 @@ after runs whose stored configs lack them: they mean the discrete values).
 - Updates: the paper's 5,000 of 128 steps (640,000 steps) in discrete control; in
   continuous control a budget of 2,000,000 steps (200,000 s of play at 10 Hz; both
   algorithms were 1.4–1.7× ``pursuit`` after 384,000), ``steps // batch_size`` updates:
-  15,625 of 128 steps, 3,906 of 512 against the fleeing evader (:data:`FLEE_BATCH_SIZE`)."""
+  15,625 of 128 steps (against the fleeing evader 4,000,000 in 7,812 updates of 512,
+  :data:`FLEE_DEFAULTS`)."""
 
 
-FLEE_BATCH_SIZE = 512
-"""``Train.batch_size`` when unset in continuous control against the scripted fleeing
-evader (elsewhere 128): 32-step rollouts in the 16 games, so the returns carry a trap's
-credit over most of the ~30 steps it takes (with ``gae_lambda`` 1), where 8-step ones
-bootstrap on the critic after 8. That evader is deterministic but for a small seeded turn
-of its candidate headings, so the long returns add little variance; A2CM (5 seeds) then
-catches it 0.77× ``pursuit``'s time, every seed at 0.77–0.80× (0.84× with 8 steps, two
-seeds of five finding the three-pursuer wall trap). Against the random evader the long
-returns carry its randomness: on ``phys_cont`` A2CM and A2C came to 1.06× ``pursuit``
-(1.02× and 1.05× with 8 steps), so the other scenarios keep 128 (``BENCHMARKS.md``,
-"Rollouts of 32 steps against the fleeing evader")."""
+FLEE_DEFAULTS: dict[str, int] = {"batch_size": 512, "steps": 4_000_000}
+"""What continuous control against the scripted fleeing evader changes of
+:data:`CONTROL_DEFAULTS` (elsewhere batches of 128, 2,000,000 steps):
+
+- 32-step rollouts in the 16 games (``batch_size`` 512), so the returns carry a trap's
+  credit over most of the ~30 steps it takes (with ``gae_lambda`` 1), where 8-step ones
+  bootstrap on the critic after 8. That evader is deterministic but for a small seeded
+  turn of its candidate headings, so the long returns add little variance. Against the
+  random evader they carry its randomness: on ``phys_cont`` A2CM and A2C came to 1.06×
+  ``pursuit`` (1.02× and 1.05× with 8 steps), so the other scenarios keep 128.
+- 4,000,000 steps (7,812 updates of 512). With 2,000,000 A2CM caught the evader in 0.77×
+  ``pursuit``'s time, every seed at 0.77–0.80×, but A2C in 0.88×, one seed of five
+  finding the three-pursuer wall trap; with 4,000,000 A2CM takes 0.77× and A2C 0.78×,
+  every seed of both at 0.77–0.79× (5 seeds each; with 8-step rollouts and 2,000,000
+  steps 0.84× and 0.92×). ``BENCHMARKS.md``, "Rollouts of 32 steps against the fleeing
+  evader"."""
 
 
 ENTROPY: dict[str, tuple[float, Schedule]] = {
@@ -662,7 +669,7 @@ def resolve_train(scenario: Scenario, cfg: Train) -> Train:
     """``cfg`` with its unset (None) keys given the values of ``scenario``'s control type
     (:data:`CONTROL_DEFAULTS`, the shaping weights times :func:`step_cost`, continuous
     control's updates from its step budget) and game (:data:`ENTROPY`,
-    :data:`FLEE_BATCH_SIZE`): what a run records and its learner sees. A default batch that
+    :data:`FLEE_DEFAULTS`): what a run records and its learner sees. A default batch that
     ``cfg.num_envs`` does not divide is a :class:`ConfigError` naming ``batch_size``."""
     values = dict(CONTROL_DEFAULTS["continuous" if scenario.continuous else "discrete"])
     values["entropy_coef"], values["entropy_schedule"] = ENTROPY[entropy_game(scenario)]
@@ -670,7 +677,7 @@ def resolve_train(scenario: Scenario, cfg: Train) -> Train:
     for key in SHAPING_KEYS:
         values[key] *= cost
     if scenario.continuous and scenario.evader == "flee":
-        values["batch_size"] = FLEE_BATCH_SIZE
+        values.update(FLEE_DEFAULTS)
     batch = values["batch_size"] if cfg.batch_size is None else cfg.batch_size
     if "steps" in values:
         values["updates"] = values.pop("steps") // batch

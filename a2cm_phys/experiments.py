@@ -11,7 +11,8 @@ Groups of cells (scenario × algorithm × seed), each a sweep in ``<logdir>/<gro
 - ``ours``: the same with our defaults;
 - ``continuous``: ``phys_cont``, ``phys_cont_flee``, ``phys_cont_collision`` × A2C/A2CM,
   beside ``pursuit`` played on the same scenario (``--cont-updates``, by default
-  continuous control's budget of 2,000,000 steps; ``--cont-set``);
+  continuous control's step budget, 2,000,000 or 4,000,000 against the fleeing evader;
+  ``--cont-set``);
 - ``selfplay``: ``grid_vs`` × A2C/A2CM pursuers against a learning evader, the cross-play
   table and the exact exploitability of the final actors (``--exploit-max-steps``
   truncates the best response's horizon, ``--no-exploit`` skips it).
@@ -44,7 +45,7 @@ from .cli import (
     split_assignments,
     writable_dir,
 )
-from .config import CONTROL_DEFAULTS, FLEE_BATCH_SIZE, ConfigError, load_train
+from .config import CONTROL_DEFAULTS, FLEE_DEFAULTS, ConfigError, load_train
 from .report.plan import (
     ALGOS,
     EXPERIMENTS,
@@ -74,7 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--cont-updates",
         type=int_range(1),
-        help="continuous runs (default: train's budget of 2,000,000 steps at 10 Hz)",
+        help="continuous runs (default: train's step budget, 2,000,000 at 10 Hz; 4,000,000 flee)",
     )
     p.add_argument("--selfplay-updates", type=int_range(1), default=5000, help="self-play runs")
     for flag, what in (
@@ -261,8 +262,9 @@ def _main(argv: Sequence[str]) -> int:
         + (
             f"{args.cont_updates:,} updates"
             if args.cont_updates
-            else f"{CONTROL_DEFAULTS['continuous']['steps']:,} steps (15,625 updates of 128;"
-            f" 3,906 of {FLEE_BATCH_SIZE} against the fleeing evader)"
+            else f"{CONTROL_DEFAULTS['continuous']['steps']:,} steps in updates of 128"
+            f" ({FLEE_DEFAULTS['steps']:,} in updates of {FLEE_DEFAULTS['batch_size']}"
+            " against the fleeing evader)"
         )
         + ".",
     }

@@ -96,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--updates",
         type=_COUNT,
-        help="gradient updates (5000; continuous control: 2,000,000 steps' worth)",
+        help="gradient updates (5000; continuous control: 2,000,000 steps' worth, 4,000,000 flee)",
     )
     p.add_argument(
         "--batch-size",

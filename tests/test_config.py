@@ -157,9 +157,9 @@ def test_updates_are_resolved_by_the_control_type_and_an_explicit_value_wins() -
     assert unset.updates is None
     for name in ("grid", "grid_collision", "phys", "grid_vs"):
         assert resolve_train(load_scenario(name), unset).updates == preset("paper")["updates"]
-    for name in ("phys_cont", "phys_cont_flee", "phys_cont_vs"):
+    for name, steps in (("phys_cont", 2e6), ("phys_cont_flee", 4e6), ("phys_cont_vs", 2e6)):
         resolved = resolve_train(load_scenario(name), unset)
-        assert 0 <= 2_000_000 - resolved.updates * resolved.batch_size < resolved.batch_size
+        assert 0 <= steps - resolved.updates * resolved.batch_size < resolved.batch_size
     chosen = load_train({"updates": 7})
     assert resolve_train(load_scenario("phys_cont"), chosen).updates == 7
     with pytest.raises(ConfigError, match="updates"):
@@ -173,10 +173,10 @@ def test_batch_size_is_resolved_by_the_control_type_and_checked_against_num_envs
     for name in ("grid", "phys", "phys_cont", "phys_cont_collision", "phys_cont_vs"):
         assert resolve_train(load_scenario(name), load_train()).batch_size == 128, name
     resolved = resolve_train(load_scenario("phys_cont_flee"), load_train())
-    assert (resolved.batch_size, resolved.steps_per_env, resolved.updates) == (512, 32, 3906)
+    assert (resolved.batch_size, resolved.steps_per_env, resolved.updates) == (512, 32, 7812)
     # an explicit batch wins, and continuous control's updates keep its step budget
     chosen = resolve_train(load_scenario("phys_cont_flee"), load_train({"batch_size": 64}))
-    assert (chosen.batch_size, chosen.updates) == (64, 31_250)
+    assert (chosen.batch_size, chosen.updates) == (64, 62_500)
     # 512 is no multiple of 48: the error names the key and the default, before any run
     with pytest.raises(ConfigError, match=r"'batch_size'.*default of 512.*num_envs=48"):
         resolve_train(load_scenario("phys_cont_flee"), load_train({"num_envs": 48}))
