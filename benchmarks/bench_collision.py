@@ -63,12 +63,10 @@ PIECES: dict[str, dict[str, Any]] = {
     "dist0": {"distance_shaping": 0.0},
     "dist.5": {"distance_shaping": 0.5},
     "dist2": {"distance_shaping": 2.0},
-    "area4": {"area_shaping": 4.0},
     "h256": {"hidden": 256},
     "n16": {"batch_size": 256},  # 16-step rollouts (16 games)
     "n32": {"batch_size": 512},  # 32-step rollouts
     "n64": {"batch_size": 1024},  # 64-step rollouts
-    "env32": {"num_envs": 32},  # 4-step rollouts (32 games)
     "noclip": {"max_grad_norm": 0.0},
     "gamma.995": {"gamma": 0.995},
     "gamma.999": {"gamma": 0.999},
