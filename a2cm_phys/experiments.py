@@ -249,6 +249,13 @@ def _main(argv: Sequence[str]) -> int:
             errors.update({f"{group}/{o.spec.name}": o.error for o in outcomes if o.error})
     from .report.build import build_report
 
+    continuous = (
+        f"{args.cont_updates:,} updates"
+        if args.cont_updates
+        else f"{CONTROL_DEFAULTS['continuous']['steps']:,} steps in updates of 128"
+        f" ({FLEE_DEFAULTS['steps']:,} in updates of {FLEE_DEFAULTS['batch_size']} against"
+        " the fleeing evader)"
+    )
     meta = {
         "command": shlex.join(["python", "-m", "a2cm_phys.experiments", *argv]),
         "date": datetime.now().strftime("%Y-%m-%d"),
@@ -258,15 +265,7 @@ def _main(argv: Sequence[str]) -> int:
         "seeds": args.seeds,
         "eval_episodes": args.eval_episodes,
         "budget": f"Updates of 128 steps: {args.updates:,} (paper, ours), "
-        f"{args.selfplay_updates:,} (self-play); continuous: "
-        + (
-            f"{args.cont_updates:,} updates"
-            if args.cont_updates
-            else f"{CONTROL_DEFAULTS['continuous']['steps']:,} steps in updates of 128"
-            f" ({FLEE_DEFAULTS['steps']:,} in updates of {FLEE_DEFAULTS['batch_size']}"
-            " against the fleeing evader)"
-        )
-        + ".",
+        f"{args.selfplay_updates:,} (self-play); continuous: {continuous}.",
     }
     missing = build_report(runs, errors, out, logdir, meta, start, args, groups, modes)
     print(f"report: {out / 'RESULTS.md'}")

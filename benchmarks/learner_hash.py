@@ -6,9 +6,8 @@ Trains six short runs (grid and physics, A2C and A2CM, continuous control, self-
 3, no log) and hashes every weight of every team and the optimiser's state. The entropy is
 pinned to the values the defaults had before the entropy schedule (1e-4 constant; 0.03 in
 self-play), the continuous run's cell-area shaping and gradient clipping to off (as
-before they existed), its initial log-std to −0.5 and its batch to 128 steps (its
-defaults until 2026-12-02), so checkouts from before and after them compare. Equal
-hashes: the same floats.
+before they existed) and its initial log-std to −0.5 (its default until 2026-12-02), so
+checkouts from before and after them compare. Equal hashes: the same floats.
 """
 
 from __future__ import annotations
@@ -43,9 +42,8 @@ def options(name: str, updates: int, algo: str) -> dict:
     out["max_grad_norm"] = 0.0
     if "area_shaping" in fields:
         out["area_shaping"] = 0.0
-    if name.startswith("phys_cont"):  # the continuous defaults before 2026-12-02
+    if name.startswith("phys_cont"):  # the continuous default before 2026-12-02
         out["log_std_init"] = -0.5
-        out["batch_size"] = 128
     return out
 
 
