@@ -1,13 +1,14 @@
 """Continuous-control speed (issue 13): one game through ``make_env("phys_cont")`` vs mpe2's
 ``simple_tag_v3`` with ``continuous_actions=True`` (3 adversaries, 1 good agent, no
-obstacles), and the batched continuous core split across 2 worker processes at B = 64 vs
-VMAS ``simple_tag`` on the CPU at B = 1,024 (1 torch thread, no landmarks). Random actions;
-games restart when they end.
+obstacles), and the batched continuous core split across 2 processes at B = 64
+(``ProcessCore(workers=2)``: this process steps half the games, one worker process the
+other half) vs VMAS ``simple_tag`` on the CPU at B = 1,024 (1 torch thread, no landmarks).
+Random actions; games restart when they end.
 
     python benchmarks/bench_continuous.py [--repeats 5] [--steps 5000] [--batch-steps 600]
                                           [--vmas-steps 200] [--batch 64] [--vmas-batch 1024]
 
-Targets: the single game at >= 3x mpe2, the 2-worker core at >= VMAS. Needs the bench extra
+Targets: the single game at >= 3x mpe2, the 2-process core at >= VMAS. Needs the bench extra
 (``pip install mpe2 vmas``). Figures are medians over interleaved repeats; each ratio is the
 median of the ratios within a repeat.
 """
@@ -23,6 +24,7 @@ import numpy as np
 
 from a2cm_phys import make_env
 from a2cm_phys.config import load_scenario
+from a2cm_phys.envs.physics import PhysicsCore
 from a2cm_phys.envs.workers import ProcessCore
 
 WORKERS = 2
@@ -127,18 +129,21 @@ def main() -> None:
 
     split = ProcessCore(scenario, args.batch, WORKERS)
     vmas = vmas_env(args.vmas_batch)
-    ours, theirs, workers, vm = [], [], [], []
+    alone = PhysicsCore(scenario, args.batch)
+    ours, theirs, workers, vm, one = [], [], [], [], []
     try:
         for r in range(args.repeats):
             ours.append(single_game(ours_env, args.steps, r, our_action))
             theirs.append(single_game(theirs_env, args.steps, r, mpe_action))
             workers.append(batched_core(split, args.batch_steps, r))
             vm.append(vmas_steps(vmas, args.vmas_steps, r))
+            one.append(batched_core(alone, args.batch_steps, r))
     finally:
         split.close()
     med = statistics.median
     single_ratio = med(o / t for o, t in zip(ours, theirs, strict=True))
     batch_ratio = med(w / v for w, v in zip(workers, vm, strict=True))
+    one_ratio = med(o / v for o, v in zip(one, vm, strict=True))
     ph = scenario.physics
     print(
         "command: python benchmarks/bench_continuous.py "
@@ -161,6 +166,10 @@ def main() -> None:
     print(
         f"| ProcessCore('{SCENARIO}'), B = {args.batch}, {WORKERS} workers | "
         f"{med(workers):,.0f} env-steps/s | {batch_ratio:.2f}x VMAS | >= 1x |"
+    )
+    print(
+        f"| PhysicsCore('{SCENARIO}'), B = {args.batch}, one process | "
+        f"{med(one):,.0f} env-steps/s | {one_ratio:.2f}x VMAS | |"
     )
 
 

@@ -322,12 +322,18 @@ def test_direct_calls_are_bit_identical_to_pymunks_api(monkeypatch):
         assert out_a.events == out_b.events
 
 
-def test_process_core_equals_physics_core_step_for_step():
-    sc = load_scenario("phys_flee")
+@pytest.mark.parametrize(("name", "workers"), [("phys_flee", 2), ("phys", 1), ("phys", 3)])
+def test_process_core_equals_physics_core_step_for_step(name, workers):
+    """Whether this process steps every game (1), or a slice beside one or two workers; in
+    ``phys`` every slice restarts games, this process's from the spares it built."""
+    sc = load_scenario(name)
     seeds = np.arange(6, dtype=np.uint64) * np.uint64(1000)
-    with ProcessCore(sc, 6, 2) as split:
+    with ProcessCore(sc, 6, workers) as split:
+        assert len(split._procs) == workers - 1
         theirs = rollout(split, seeds, 80, 1)
         t_split = split.t.copy()
+        if workers > 1:  # this process built spares for its slice while the workers stepped
+            assert split._own.spare_worlds > 0
     single = PhysicsCore(sc, 6)
     ours = rollout(single, seeds, 80, 1)
     np.testing.assert_array_equal(t_split, single.t)
@@ -418,9 +424,9 @@ def test_process_core_stops_a_worker_that_does_not_answer():
         actions = np.zeros((4, sc.pursuers), dtype=np.int64)
         core.step(actions)
         core.timeout = 0.5
-        hung = core._procs[0]
+        hung = core._procs[0]  # worker 1: this process steps slice 0
         os.kill(hung.pid, signal.SIGSTOP)  # alive, but it will never answer
-        with pytest.raises(WorkerError, match=r"worker 0 .* did not answer within 0.5 s"):
+        with pytest.raises(WorkerError, match=r"worker 1 .* did not answer within 0.5 s"):
             core.step(actions)
         assert not hung.is_alive()  # killed: SIGTERM stays pending while it is stopped
         with pytest.raises(WorkerError, match="closed"):
@@ -439,7 +445,7 @@ def test_process_core_reports_bad_positions_and_worker_death():
             core.reset(np.array([0, 3]), np.array([1, 2], dtype=np.uint64), bad)
         assert core.t.tolist() == [1] * 4  # no game was restarted
         core.step(np.zeros((4, sc.pursuers), dtype=np.int64))  # still usable
-        core._procs[1].kill()
+        core._procs[0].kill()  # worker 1: this process steps slice 0
         with pytest.raises(WorkerError, match=r"worker 1 .* died"):
             core.step(np.zeros((4, sc.pursuers), dtype=np.int64))
     finally:

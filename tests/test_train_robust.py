@@ -114,7 +114,7 @@ def test_a_dead_worker_saves_progress_names_it_and_says_how_to_resume(
     def step_then_die(self, *args):
         calls.append(1)
         if len(calls) == 4 * 6 + 2:  # inside update 7 (4 steps per game and update)
-            os.kill(self._procs[1].pid, signal.SIGKILL)
+            os.kill(self._procs[0].pid, signal.SIGKILL)  # worker 1 (slice 0 is ours)
         return step(self, *args)
 
     monkeypatch.setattr(ProcessCore, "step", step_then_die)

@@ -34,14 +34,14 @@ def _alive(pid: int) -> bool:
 def _start_trainer(tmp_path: Path) -> tuple[subprocess.Popen[str], list[int]]:
     cmd = [
         sys.executable, "-m", "a2cm_phys.train", "--scenario", "phys", "--num-envs", "4",
-        "--workers", "2", "--updates", "100000", "--no-progress", "--logdir", str(tmp_path),
+        "--workers", "3", "--updates", "100000", "--no-progress", "--logdir", str(tmp_path),
     ]  # fmt: skip
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     assert proc.stderr is not None
     line = proc.stderr.readline()  # printed once the workers are up
     assert line.startswith("run directory:"), line
     workers = _children(proc.pid)
-    assert len(workers) == 2 and all(_alive(w) for w in workers)
+    assert len(workers) == 2 and all(_alive(w) for w in workers)  # the trainer steps a slice
     return proc, workers
 
 

@@ -1,18 +1,23 @@
-"""``ProcessCore``: the physics core with its games split across worker processes.
+"""``ProcessCore``: the physics core with its games split across processes.
 
-Each worker holds one :class:`~.physics.PhysicsCore` for a contiguous slice of the games
-and talks to the parent over a :func:`multiprocessing.Pipe`. The numbers travel through
-shared memory (:class:`SharedBatch`): the parent writes every game's actions, the workers
-write their games' step outcomes, positions and velocities, and the pipe carries only the
-requests and the few contact events. A step is one round trip: the parent asks every
-worker before collecting any reply, so the workers step in parallel.
+``workers`` processes step the games, each a contiguous slice: the caller's process steps
+the first slice itself, and each other slice has a worker process that holds one
+:class:`~.physics.PhysicsCore` and talks to the parent over a :func:`multiprocessing.Pipe`.
+The numbers travel through shared memory (:class:`SharedBatch`): the parent writes every
+game's actions, each process writes its games' step outcomes, positions and velocities,
+and the pipe carries only the requests and the few contact events. A step is one round
+trip: the parent asks every worker, steps its own slice, then collects the replies, so all
+slices step in parallel. On two cores, ``workers=2`` is two busy processes and one
+hand-off a step. A worker polls for its next request, and the parent for the replies, for
+:data:`SPIN_SECONDS` before blocking, so that in a loop of steps neither waits on the
+kernel to wake it (:func:`_spin`).
 
 Resets cost no round trip of their own. The state of a freshly built world is known in
 advance (bodies at rest at their start or placed positions), so ``reset`` writes it at
 once, after validating placements here so that a bad one changes no game, and marks the
 games in shared memory with their new seeds (placements, which are rare, wait to go with
-the next request). The worker applies the marked resets just before its next step, taking
-worlds it rebuilt in advance while it was waiting (see
+the next request). Each process applies the marked resets of its slice just before its
+next step, taking worlds it rebuilt in advance while it was waiting (see
 :meth:`~.physics.PhysicsCore.build_spare`). Games are independent and their randomness is
 per episode seed, so a ``ProcessCore`` gives exactly the trajectories of a single
 ``PhysicsCore`` of the same size.
@@ -110,6 +115,10 @@ def _bytes(dtype: np.dtype, num_envs: int, tail: tuple[int, ...]) -> int:
 _PR_SET_PDEATHSIG = 1
 """Linux ``prctl`` option: the signal a process gets when its parent dies."""
 
+SPIN_SECONDS = 5e-4
+"""How long a worker polls for its next request after replying, and the parent for the
+workers' replies after stepping its own slice, before either blocks (see :func:`_spin`)."""
+
 PARENT_POLL_SECONDS = 1.0
 """How often a worker checks that its parent is alive, where the kernel cannot tell it."""
 
@@ -193,19 +202,45 @@ def _serve(
             conn.close()
             return
         try:
-            marked = mine["reset"]
-            envs = np.flatnonzero(marked)
-            if len(envs):
-                where = [placed.get(env) for env in envs.tolist()] if placed else None
-                core.reset(envs, mine["seed"][envs], where)
-                marked[envs] = False
-            outcome = core.step(mine["actions"], mine["evader_actions"] if learned else None)
-            for name in _OUTCOME:
-                mine[name][:] = getattr(outcome, name)
-            mine["state"][:] = core._state
-            conn.send(("ok", outcome.events))
+            conn.send(("ok", _step_slice(core, mine, placed, learned)))
         except Exception as err:  # report to the parent, which re-raises
             _report(conn, err)
+        _spin([conn], SPIN_SECONDS)
+
+
+def _spin(conns: Sequence[Connection], seconds: float) -> None:
+    """Poll ``conns`` until each has something to read, for at most ``seconds``.
+
+    Between two steps of a loop a process should not sleep in the kernel: waking it costs
+    about 50-100 us on a virtual machine, and a CPU that went idle comes back with its
+    caches cold (measured here: the parent's own slice took 1.8x as long after it had
+    blocked for a reply as after it had polled for one)."""
+    deadline = time.perf_counter() + seconds
+    for conn in conns:
+        while not conn.poll(0) and time.perf_counter() < deadline:
+            pass
+
+
+def _step_slice(
+    core: PhysicsCore,
+    mine: dict[str, np.ndarray],
+    placed: dict[int, Placement] | None,
+    learned: bool,
+) -> list[list]:
+    """Step the games of ``core``, whose shared arrays are ``mine``: first the resets marked
+    there (with their ``placed`` positions, by local index), then one step; write the
+    outcome and the state to ``mine`` and return the contact events."""
+    marked = mine["reset"]
+    envs = np.flatnonzero(marked)
+    if len(envs):
+        where = [placed.get(env) for env in envs.tolist()] if placed else None
+        core.reset(envs, mine["seed"][envs], where)
+        marked[envs] = False
+    outcome = core.step(mine["actions"], mine["evader_actions"] if learned else None)
+    for name in _OUTCOME:
+        mine[name][:] = getattr(outcome, name)
+    mine["state"][:] = core._state
+    return outcome.events
 
 
 def _report(conn: Connection, err: Exception) -> None:
@@ -218,17 +253,18 @@ def _report(conn: Connection, err: Exception) -> None:
 
 
 class ProcessCore(StateViews):
-    """``num_envs`` physics games stepped by ``workers`` processes (implements ``core.Core``).
+    """``num_envs`` physics games stepped by ``workers`` processes: this one and
+    ``workers - 1`` worker processes (implements ``core.Core``).
 
     Call :meth:`close` (or use it as a context manager) to stop the workers; they also
     end when the parent process dies, whatever killed it. A worker that dies raises
-    :class:`WorkerError` naming it and its exit code at the next call, and so does one that
-    is alive but has not answered for ``timeout`` seconds (``None``: wait for ever); either
-    way the core is closed. ``start_method`` is
-    multiprocessing's (default: the platform's; ``spawn`` and ``forkserver`` need the
-    usual ``if __name__ == "__main__":`` guard in the calling script). ``spares`` is how
-    many worlds each worker rebuilds ahead while idle (default: a quarter of its games,
-    plus one; see :meth:`PhysicsCore.build_spare`).
+    :class:`WorkerError` naming it (workers are numbered from 1: slice 0 is this process's)
+    and its exit code at the next call, and so does one that is alive but has not answered
+    for ``timeout`` seconds (``None``: wait for ever); either way the core is closed.
+    ``start_method`` is multiprocessing's (default: the platform's; ``spawn`` and
+    ``forkserver`` need the usual ``if __name__ == "__main__":`` guard in the calling
+    script). ``spares`` is how many worlds each process rebuilds ahead while idle (default:
+    a quarter of its games, plus one; see :meth:`PhysicsCore.build_spare`).
     """
 
     def __init__(
@@ -257,15 +293,16 @@ class ProcessCore(StateViews):
         self._views = self._shared.views()
         self._state = self._views["state"]  # as PhysicsCore's, written by the workers
         self._state[:, 0] = self._start
-        self._slices = np.array_split(np.arange(num_envs), workers)
-        self._bounds = np.cumsum([0] + [len(s) for s in self._slices])
+        slices = np.array_split(np.arange(num_envs), workers)
+        self._bounds = np.cumsum([0] + [len(s) for s in slices])
         self._placed: list[dict[int, Placement]] = [{} for _ in range(workers)]
         self._conns: list[Connection] = []
         self._procs: list[Any] = []
         self._closed = False
-        for i, games in enumerate(self._slices):
+        self._learned = scenario.evader == "learned"
+        ahead = [len(games) // 4 + 1 if spares is None else spares for games in slices]
+        for i, games in enumerate(slices[1:], start=1):
             parent, child = ctx.Pipe()
-            ahead = len(games) // 4 + 1 if spares is None else spares
             proc = ctx.Process(
                 target=_serve,
                 args=(
@@ -273,7 +310,7 @@ class ProcessCore(StateViews):
                     scenario,
                     self._shared,
                     (int(games[0]), int(games[-1]) + 1),
-                    ahead,
+                    ahead[i],
                     os.getpid(),
                 ),
                 name=f"a2cm-physics-{i}",
@@ -283,7 +320,17 @@ class ProcessCore(StateViews):
             child.close()  # so that the parent sees EOF when the worker dies
             self._conns.append(parent)
             self._procs.append(proc)
-        self._gather(list(range(workers)))  # each worker says it is ready
+        # The first slice is stepped here, in the caller's process, while the others step
+        # theirs: on two cores, two busy processes and one hand-off a step, not three and
+        # two. (Built after the workers start, which need not inherit its worlds.)
+        try:
+            self._own = PhysicsCore(scenario, len(slices[0]))
+        except BaseException:
+            self.close()
+            raise
+        self._own_spares = ahead[0]
+        self._mine = self._shared.views(0, len(slices[0]))
+        self._gather()  # each worker says it is ready
 
     # ------------------------------------------------------------------ Core
 
@@ -319,7 +366,7 @@ class ProcessCore(StateViews):
                 self._placed[w].pop(env - int(self._bounds[w]), None)
 
     def step(self, actions: np.ndarray, evader_actions: np.ndarray | None = None) -> StepOutcome:
-        """Advance every game one step; the workers step their slices in parallel.
+        """Advance every game one step; every process steps its slice in parallel.
         ``evader_actions`` are a learned evader's (required then, refused otherwise)."""
         if self._closed:
             raise WorkerError("ProcessCore is closed")
@@ -332,17 +379,25 @@ class ProcessCore(StateViews):
         elif evader_actions is not None:
             raise refuse_evader_actions(self.scenario)
         self._views["actions"][:] = actions  # before asking any worker
-        for w in range(len(self._conns)):
+        for w, conn in enumerate(self._conns, start=1):
             try:
                 if self._placed[w]:
-                    self._conns[w].send(("step", self._placed[w]))
+                    conn.send(("step", self._placed[w]))
                 else:  # the common request, pickled once
-                    self._conns[w].send_bytes(_STEP)
+                    conn.send_bytes(_STEP)
             except (BrokenPipeError, ConnectionResetError, OSError):
                 raise self._death(w) from None
-            if self._placed[w]:
-                self._placed[w] = {}
-        events = [game for reply in self._gather(range(len(self._conns))) for game in reply]
+            self._placed[w] = {}
+        try:
+            events = _step_slice(self._own, self._mine, self._placed[0], self._learned)
+        except BaseException:
+            self._gather(ready=False)  # no reply may stay in a pipe for the next step
+            raise
+        self._placed[0] = {}
+        # Prepare worlds for this slice's resets while the workers finish theirs.
+        while self._own.spare_worlds < self._own_spares and not all(c.poll(0) for c in self._conns):
+            self._own.build_spare()
+        events += [game for reply in self._gather() for game in reply]
         self.t += 1
         views = self._views
         return StepOutcome(
@@ -352,12 +407,13 @@ class ProcessCore(StateViews):
 
     # ------------------------------------------------------------------ protocol
 
-    def _gather(self, workers: Sequence[int]) -> list[Any]:
+    def _gather(self, ready: bool = True) -> list[Any]:
         """Every worker's reply, in order; a worker's error is raised once all have replied,
-        so that no reply is left in a pipe to be mistaken for the next one."""
+        so that no reply is left in a pipe to be mistaken for the next one (``ready=False``:
+        collect the replies and raise nothing of theirs, when the caller raises its own)."""
         replies, error = [], None
-        for w in workers:
-            conn = self._conns[w]
+        _spin(self._conns, SPIN_SECONDS)
+        for w, conn in enumerate(self._conns, start=1):
             try:  # a worker that dies closes its end of the pipe: recv raises EOFError
                 if self.timeout is not None and not conn.poll(self.timeout):
                     raise self._silence(w)
@@ -369,12 +425,12 @@ class ProcessCore(StateViews):
                 err.__cause__ = WorkerError(f"physics worker {w} failed:\n{text}")
                 error = error or err
             replies.append(reply)
-        if error is not None:
+        if error is not None and ready:
             raise error
         return replies
 
     def _death(self, worker: int) -> WorkerError:
-        proc = self._procs[worker]
+        proc = self._procs[worker - 1]
         proc.join(timeout=1.0)
         self.close()
         return WorkerError(
@@ -383,7 +439,7 @@ class ProcessCore(StateViews):
         )
 
     def _silence(self, worker: int) -> WorkerError:
-        proc = self._procs[worker]
+        proc = self._procs[worker - 1]
         self.close()
         return WorkerError(
             f"physics worker {worker} ({proc.name}, pid {proc.pid}) did not answer within "
