@@ -32,6 +32,7 @@ Algo = Literal["a2c", "a2cm"]
 Control = Literal["discrete", "continuous"]
 Optimizer = Literal["rmsprop", "adam"]
 Schedule = Literal["constant", "linear"]
+Encoding = Literal["xy", "onehot"]
 
 DEFAULT_DT = {"discrete": 1.0, "continuous": 0.1}
 """The control period ``physics.dt`` (s) of each control type when a scenario omits it."""
@@ -209,6 +210,8 @@ class Train:
     entropy_coef: float | None = None  # None: by the game (ENTROPY, resolve_train)
     value_coef: float = 0.5
     hidden: int = 128
+    layers: int = 1  # hidden layers of every actor and critic (the paper's: 1)
+    encoding: Encoding = "xy"  # the networks' input: the observation, or one-hot cells (grid)
     reward_scale: float = 1.0
     max_grad_norm: float | None = None  # None: by the control type (CONTROL_DEFAULTS); 0: off
     device: str = "cpu"
@@ -240,11 +243,20 @@ class Train:
     pool_every: int = 0  # self-play: snapshot both teams every K updates (0: simultaneous)
     pool_size: int = 10  # snapshots kept per team (oldest dropped), see a2cm_phys.opponents
     pool_latest: float = 0.5  # probability that an update is latest against latest
+    # Grid self-play: exploitability descent (a2cm_phys/descent.py). The pursuers' actors
+    # learn only by stepping down the discounted value of the evader's exact best response
+    # to them, every K updates; the evader learns from the rollouts.
+    descent_every: int = 0  # 0: off (the pursuers learn from their rollouts)
+    descent_steps: int = 1  # actor steps per best response
+    descent_lr: float = 1e-3  # Adam's step size for them
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of the first impossible value."""
         check_limits(self, TRAIN_LIMITS)
-        for key in ("updates", "batch_size", "num_envs", "hidden", "threads", "workers"):
+        for key in (
+            "updates", "batch_size", "num_envs", "hidden", "layers", "threads", "workers",
+            "descent_steps",
+        ):  # fmt: skip
             if getattr(self, key) is not None and getattr(self, key) < 1:
                 raise _KeyError(key, f"must be >= 1, got {getattr(self, key)}")
         if self.batch_size is not None and self.batch_size % self.num_envs:
@@ -254,7 +266,7 @@ class Train:
             )
         if not 0.0 <= self.gamma <= 1.0:
             raise _KeyError("gamma", f"must be in [0, 1], got {self.gamma}")
-        for key in ("lr", "reward_scale"):
+        for key in ("lr", "reward_scale", "descent_lr"):
             if not getattr(self, key) > 0:
                 raise _KeyError(key, f"must be > 0, got {getattr(self, key)}")
         for key in ("entropy_coef", "value_coef", "max_grad_norm", "rmsprop_eps"):
@@ -269,7 +281,10 @@ class Train:
             raise _KeyError("gae_lambda", f"must be in [0, 1], got {self.gae_lambda}")
         if not self.adam_eps > 0:
             raise _KeyError("adam_eps", f"must be > 0, got {self.adam_eps}")
-        for key in ("collision_budget", "lagrange_lr", "collision_weight", "exploit_every"):
+        for key in (
+            "collision_budget", "lagrange_lr", "collision_weight", "exploit_every",
+            "descent_every",
+        ):  # fmt: skip
             if getattr(self, key) < 0:
                 raise _KeyError(key, f"must be >= 0, got {getattr(self, key)}")
         for key in ("distance_shaping", "area_shaping", "mean_bound_coef"):
@@ -323,10 +338,23 @@ PRESETS: dict[str, dict[str, Any]] = {
         "distance_shaping": 0.0,
         "area_shaping": 0.0,
     },
+    "descent": {
+        "descent_every": 8,
+        "descent_steps": 2,
+        "descent_lr": 1e-3,
+        "layers": 2,
+        "hidden": 128,
+        "encoding": "onehot",
+        "updates": 2000,
+    },
 }
 """Named sets of :class:`Train` values (``--preset NAME``). ``paper`` is the paper's exact
 method (SPEC §6): RMSprop 7e-3 (Keras rho 0.9, eps 1e-7), one game, plain eq. 13 returns,
-raw rewards. Explicit options given beside a preset win over it."""
+raw rewards. ``descent`` is grid self-play whose pursuers learn by exploitability descent
+(:mod:`a2cm_phys.descent`; 250 exact best responses, two actor steps each, on actors of
+two hidden layers of 128 over one-hot cells; about 10-20 minutes on ``grid_vs``), which
+gives pursuers that no evader escapes for long (``BENCHMARKS.md``). Explicit options given
+beside a preset win over it."""
 
 
 def preset(name: str) -> dict[str, Any]:
@@ -347,10 +375,13 @@ TRAIN_LIMITS: dict[str, tuple[int, str]] = {
     "num_envs": (65_536, "every game's state is held in memory"),
     "batch_size": (1 << 20, "a batch is held in memory"),
     "hidden": (16_384, "the networks' weights are held in memory"),
+    "layers": (64, "the networks' weights are held in memory"),
+    "descent_steps": (10_000, "each step is a pass over the visited states"),
     "threads": (256, "each torch thread needs memory of its own"),
     "workers": (256, "each worker is a process"),
     "seed": (2**64 - 1, "seeds feed 64-bit generators"),
     "lr": (1000, "a step size; far larger ones overflow the optimiser's float32 arithmetic"),
+    "descent_lr": (1000, "a step size; far larger ones overflow Adam's float32 arithmetic"),
     "pool_size": (10_000, "every snapshot's weights are held in memory and checkpointed"),
 }
 """Largest training values, with the reason."""

@@ -42,6 +42,7 @@ SERIES = (
 EXPLOIT_SERIES = (
     ("exploit_worst_case", "evader's best response (pursuers' worst case)", "-"),
     ("exploit_pursuers_br", "pursuers' best response to the learned evader", "--"),
+    ("descent_value", "best response the descent trains against (discounted)", ":"),
 )
 """(update metric, legend text, line style) of the exploitability figure."""
 EXPLOIT_FILE = "exploitability.png"

@@ -5,7 +5,10 @@
 - ``oracle``: the exact optimum of the grid game (:mod:`a2cm_phys.oracle`); in physics
   mode the grid oracle driven in the physics arena: each body's centre is mapped to the
   cell it lies in, and the oracle's move becomes the velocity command in that direction.
-  Against a learned evader it is the oracle that is optimal against the random evader.
+  It is the optimum against the scenario's own evader (the random one where that is
+  learned), one team whatever evader :func:`matchup` sets against it: against another
+  evader it is that team, not the other evader's best response (which is the oracle of
+  a scenario with that evader, ``--set evader=…``).
 - ``minimax``: the grid's minimax team (:mod:`a2cm_phys.solve.minimax`): deterministic,
   optimal when the evader sees its move, so no evader escapes it longer than the bound
   (grid mode only).
@@ -177,8 +180,8 @@ def matchup(
     if pursuer_run is not None:
         pursuer_policy_ = model_policy(pursuer_run.pursuers, greedy)
         p_label = f"{_short(pursuers)} ({'greedy' if greedy else 'sampled'})"
-    else:
-        pursuer_policy_, p_label = pursuer_policy(pursuers, game), pursuers
+    else:  # of the scenario, not the game: the oracle stays one team in a cross-play
+        pursuer_policy_, p_label = pursuer_policy(pursuers, scenario), pursuers
     e_label = _short(evader) if evader_model is not None and evader else evader_name
     e_policy = None if evader_model is None else model_policy(evader_model, greedy)
     if evader == BEST_RESPONSE:  # deterministic: its table has one-hot rows

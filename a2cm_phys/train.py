@@ -47,13 +47,11 @@ from .cli import (
     writable_dir,
 )
 from .config import Scenario, Train, resolve_train, to_dict
-from .opponents import check_pool
 from .trainer import (
     EXIT_INTERRUPTED,
     EXIT_NONFINITE,
     Trainer,
-    check_seed,
-    check_workers,
+    check_run,
     policy_rng,
 )
 
@@ -182,9 +180,7 @@ def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
     scenario = scenario_from_args(args)
     cfg = train_from_args(args, {k: getattr(args, k) for k in _TRAIN_FLAGS})
     cfg = resolve_train(scenario, cfg)  # what config.json records and the learner sees
-    check_seed(cfg)  # before the run directory exists
-    check_workers(scenario, cfg)
-    check_pool(scenario, cfg)
+    check_run(scenario, cfg)  # before the run directory exists
     if args.run_dir:
         run_dir = Path(args.run_dir)
         check_new_run_dir(run_dir)

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from . import checkpoint
@@ -41,6 +42,7 @@ from .config import (
     stored_train,
     to_dict,
 )
+from .descent import ExploitabilityDescent, check_descent
 from .envs.vector import VectorEnv
 from .exploitability import exploitability, solvable
 from .opponents import LATEST, PAIRING_CODES, OpponentPool, Pairing, check_pool
@@ -71,6 +73,15 @@ def check_workers(scenario: Scenario, cfg: Train) -> None:
             f"training options: key 'workers': {cfg.workers} processes for num_envs="
             f"{cfg.num_envs} games; use at most num_envs workers (or more --num-envs)"
         )
+
+
+def check_run(scenario: Scenario, cfg: Train) -> None:
+    """Every check of training options against the scenario, before anything is built: a
+    :class:`ConfigError` naming the first key at fault."""
+    check_seed(cfg)
+    check_workers(scenario, cfg)
+    check_pool(scenario, cfg)
+    check_descent(scenario, cfg)
 
 
 def policy_rng(seed: int) -> np.random.Generator:
@@ -106,9 +117,7 @@ class Trainer:
         checkpoint_every: int = 0,
     ) -> None:
         cfg = resolve_train(scenario, cfg)
-        check_seed(cfg)
-        check_workers(scenario, cfg)
-        check_pool(scenario, cfg)
+        check_run(scenario, cfg)
         torch.set_num_threads(cfg.threads)
         self.scenario, self.cfg, self.run_dir = scenario, cfg, Path(run_dir)
         self.record, self.log_every, self.scene_every = record, log_every, scene_every
@@ -125,6 +134,11 @@ class Trainer:
             else None
         )
         self.pairing: Pairing = LATEST
+        self.descent = (  # grid self-play against the exact best response (a2cm_phys.descent)
+            ExploitabilityDescent(scenario, cfg, self.model, cfg.seed)
+            if cfg.descent_every
+            else None
+        )
         self.stats = EpisodeStats()
         self.update = 0
         self.last_metrics: dict[str, float] = {}
@@ -149,6 +163,7 @@ class Trainer:
             "evader_learner": None if self.evader is None else self.evader.learner.state_dict(),
             "rng": self.rng.bit_generator.state,
             "pool": None if self.pool is None else self.pool.state_dict(),
+            "descent": None if self.descent is None else self.descent.state_dict(),
             "env": self.env.state(),
             "stats": self.stats.state(),
             "wall_time": self.wall_time(),
@@ -162,6 +177,8 @@ class Trainer:
         self.rng.bit_generator.state = state["rng"]
         if self.pool is not None:
             self.pool.load_state_dict(state["pool"])
+        if self.descent is not None:
+            self.descent.load_state_dict(state["descent"])
         self.obs = self.env.load_state(state["env"])
         self.stats = EpisodeStats.from_state(state["stats"])
         self.update = self.saved_update = int(state["update"])
@@ -222,7 +239,9 @@ class Trainer:
         self._last_save = time.perf_counter()
         status = "done"
         dead_worker = _worker_error(self.scenario)
-        with self._signals_deferred() as signals:
+        # numpy's BLAS too gets the run's threads (it starts one per core otherwise: two
+        # runs on two cores would then run four threads)
+        with threadpool_limits(limits=self.cfg.threads), self._signals_deferred() as signals:
             with self._recorder() as recorder, self._bar() as bar:
                 log = _ShieldedLog(recorder, signals) if recorder is not None else None
                 on_step = log.record_step if log is not None else None
@@ -277,7 +296,7 @@ class Trainer:
         self._phase = _LEARN
         progress = self.update / self.cfg.updates
         self.last_metrics = {}
-        if pairing.learns("pursuers"):
+        if pairing.learns("pursuers") and self.descent is None:  # else: by descent, below
             self.last_metrics = self.learner.update(self.batch, progress)
         if self.evader is not None and pairing.learns("evader"):
             evader_metrics = self.evader.learner.update(self.evader.batch, progress)
@@ -285,6 +304,9 @@ class Trainer:
         if pool is not None:  # who played: see a2cm_phys.opponents.PAIRING_CODES
             self.last_metrics["pool_pairing"] = PAIRING_CODES[pairing.kind]
             self.last_metrics["pool_snapshot_update"] = pairing.taken_at
+        every = self.cfg.descent_every
+        if self.descent is not None and (self.update + 1) % every == 0:
+            self.last_metrics.update(self.descent.step())
         every = self.cfg.exploit_every
         if every and (self.update + 1) % every == 0 and solvable(self.scenario):
             assert self.evader is not None
@@ -353,11 +375,14 @@ class Trainer:
             **(
                 {
                     "evader_mean_return_last_1000": s.recent_mean(3),
-                    "opponents": "simultaneous"
-                    if self.pool is None
-                    else self.pool.describe(cfg.pool_every),
+                    "opponents": self._opponents(),
                 }
                 if self.evader is not None
+                else {}
+            ),
+            **(
+                {"descent_value": self.descent.last_value}
+                if self.descent is not None
                 else {}
             ),
             "captures": s.captures,
@@ -370,6 +395,17 @@ class Trainer:
             "steps_per_s": steps / wall if wall > 0 else math.nan,
             "last_checkpoint_update": self.saved_update,
         }
+
+    def _opponents(self) -> str:
+        """How the teams of a self-play run met their opponents, for the summary."""
+        cfg = self.cfg
+        text = "simultaneous" if self.pool is None else self.pool.describe(cfg.pool_every)
+        if self.descent is None:
+            return text
+        return (
+            f"pursuers: exploitability descent every {cfg.descent_every} updates;"
+            f" evader: {text}"
+        )
 
     def _write_summary(self, status: str) -> None:
         self.last_summary = self.summary(status)
@@ -513,6 +549,7 @@ class _Progress:
                 ret100=f"{s.recent_mean(1, 100):.4g}",
                 **({"evader_ret100": f"{s.recent_mean(3, 100):.4g}"} if t.evader else {}),
                 **({"opp": t.pairing.kind} if t.pool is not None else {}),
+                **({"descent": f"{t.descent.last_value:.4g}"} if t.descent is not None else {}),
                 collisions=s.collisions,
                 steps_s=f"{t._session_steps / (now - t._session_start):.0f}",
                 refresh=False,

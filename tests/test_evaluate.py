@@ -115,3 +115,22 @@ def test_cli_oracle_policy_beats_random(
         assert main(args) == 0
         reports[policy] = json.loads(capsys.readouterr().out)["capture_steps"]["mean"]
     assert reports["oracle"]["hi"] < reports["random"]["lo"]
+
+
+def test_the_oracle_is_one_team_whatever_evader_it_meets(tmp_path) -> None:
+    """In a cross-play the oracle row is the scenario's optimum (here against the random
+    evader) in every column, not each column's best response (which differs)."""
+    import dataclasses
+
+    from a2cm_phys.oracle import OraclePolicy
+    from a2cm_phys.policies import matchup
+    from a2cm_phys.solve.tables import joint_observations, valid_states
+
+    sc = load_scenario("grid", {"size": 3, "pursuers": 2, "max_steps": 50})
+    obs = joint_observations(sc)[valid_states(sc)]
+    rng = np.random.default_rng(0)
+    own = OraclePolicy(sc, cache_dir=tmp_path).act(obs)
+    for evader in ("random", "flee", "static"):
+        np.testing.assert_array_equal(matchup(sc, "oracle", evader).pursuers(obs, rng), own)
+    flee = dataclasses.replace(sc, evader="flee")
+    assert not np.array_equal(OraclePolicy(flee, cache_dir=tmp_path).act(obs), own)

@@ -9,7 +9,13 @@ import torch.nn.functional as F
 from torch import nn
 
 from a2cm_phys.algos.distributions import CategoricalActions, GaussianActions
-from a2cm_phys.algos.models import ActorCritic, StackedLinear, make_model, sample_categorical
+from a2cm_phys.algos.models import (
+    ActorCritic,
+    OneHotCells,
+    StackedLinear,
+    make_model,
+    sample_categorical,
+)
 from a2cm_phys.config import Scenario, Train
 
 torch.set_num_threads(1)
@@ -199,3 +205,58 @@ def test_make_model_follows_the_scenario_control() -> None:
     assert isinstance(discrete.dist, CategoricalActions) and discrete.log_std is None
     split = make_model(Train(split_rewards=True, algo="a2c"), Scenario())
     assert split.n_values == 2 and split.value(torch.zeros(Scenario().obs_dim)).shape == (N, 2)
+
+
+def deep(shared: bool, layers: int = 3, onehot: bool = True) -> ActorCritic:
+    """Three hidden layers of 16 over the one-hot cells of a 5x5 grid observation."""
+    return ActorCritic(
+        OBS, N, A, 16, shared_critic=shared, generator=torch.Generator().manual_seed(0),
+        layers=layers, encoding=OneHotCells(5) if onehot else None,
+    )  # fmt: skip
+
+
+def grid_obs(rows: int, seed: int = 0) -> np.ndarray:
+    """Observations of a 5x5 grid: cells divided by size - 1."""
+    return np.random.default_rng(seed).integers(0, 5, (rows, OBS)).astype(np.float32) / 4
+
+
+@pytest.mark.parametrize("shared", [True, False])
+def test_deeper_networks_over_one_hot_cells(shared: bool) -> None:
+    m = deep(shared)
+    actor = (OBS * 5 * 16 + 16) + 2 * (16 * 16 + 16) + (16 * A + A)
+    critic = (OBS * 5 * 16 + 16) + 2 * (16 * 16 + 16) + (16 + 1)
+    assert m.layers == 3 and n_params(m) == N * actor + m.n_critics * critic
+    obs = grid_obs(9)
+    x = torch.from_numpy(obs)
+    onehot = F.one_hot(torch.round(x * 4).long(), 5).float().flatten(1)  # (9, OBS * 5)
+    assert torch.equal(OneHotCells(5).torch(x), onehot)
+    np.testing.assert_array_equal(OneHotCells(5).numpy(obs), onehot.numpy())
+    with torch.no_grad():
+        logits, values = m(x)
+    for i in range(N):  # agent i's own stack of layers, by hand
+        h = F.relu(onehot @ m.actor_hidden.weight[i].T + m.actor_hidden.bias[i])
+        for layer in m.actor_deep:
+            h = F.relu(h @ layer.weight[i].T + layer.bias[i])
+        torch.testing.assert_close(logits[:, i], h @ m.actor_out.weight[i].T + m.actor_out.bias[i])
+    np.testing.assert_allclose(m.outputs_np(obs), logits.numpy(), rtol=1e-5, atol=1e-5)
+    assert values.shape == (9, m.n_critics)
+
+
+def test_one_layer_draws_the_papers_weights() -> None:
+    """Deeper layers are drawn after the paper's, so one layer is the same network."""
+    paper = model(True)
+    one = ActorCritic(OBS, N, A, H, shared_critic=True, generator=torch.Generator().manual_seed(0),
+                      layers=1)  # fmt: skip
+    for (k, a), (_, b) in zip(paper.state_dict().items(), one.state_dict().items(), strict=True):
+        assert torch.equal(a, b), k
+    two = ActorCritic(OBS, N, A, H, shared_critic=True, generator=torch.Generator().manual_seed(0),
+                      layers=2)  # fmt: skip
+    for k, a in paper.state_dict().items():
+        assert torch.equal(a, two.state_dict()[k]), k
+
+
+def test_make_model_reads_layers_and_encoding() -> None:
+    m = make_model(Train(layers=2, encoding="onehot"), Scenario())
+    assert m.layers == 2 and isinstance(m.encoding, OneHotCells) and m.encoding.size == 5
+    obs = grid_obs(4)
+    np.testing.assert_allclose(m.action_probs_np(obs).sum(-1), 1.0, rtol=1e-6)

@@ -67,8 +67,12 @@ def test_one_run_trains_both_teams(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     "opponents",
-    [(), ("--set", "train.pool_every=2", "train.pool_size=2")],
-    ids=["simultaneous", "pool"],
+    [
+        (),
+        ("--set", "train.pool_every=2", "train.pool_size=2"),
+        ("--set", "train.descent_every=3", "size=3", "pursuers=2", "max_steps=50"),
+    ],
+    ids=["simultaneous", "pool", "descent"],
 )
 def test_self_play_resumes_bit_for_bit(tmp_path: Path, opponents: tuple[str, ...]) -> None:
     full_dir, part_dir = tmp_path / "a", tmp_path / "b"
@@ -83,7 +87,14 @@ def test_self_play_resumes_bit_for_bit(tmp_path: Path, opponents: tuple[str, ...
         for key, value in a[team]["model"].items():
             assert torch.equal(value, b[team]["model"][key]), (team, key)
     assert a["rng"] == b["rng"]
-    if opponents:  # the pool: same draws, same snapshots (the newest two: updates 10 and 12)
+    if "train.descent_every=3" in opponents:  # the same best response and Adam state
+        da, db = a["descent"], b["descent"]
+        assert torch.equal(da["values"], db["values"]) and da["rng"] == db["rng"]
+        assert torch.equal(
+            da["optimizer"]["state"][0]["exp_avg"], db["optimizer"]["state"][0]["exp_avg"]
+        )
+        assert a["pool"] is None
+    elif opponents:  # the pool: same draws, same snapshots (the newest two: updates 10 and 12)
         assert a["pool"]["rng"] == b["pool"]["rng"] and a["pool"]["counts"] == b["pool"]["counts"]
         for side in ("pursuers", "evader"):
             pa, pb = a["pool"]["snapshots"][side], b["pool"]["snapshots"][side]

@@ -2,9 +2,15 @@
 
 Every agent of a team observes the same global state, so one input row feeds all N actors
 and all critics. Each actor is ``Linear(obs, hidden) → ReLU → Linear(hidden, n_outputs)``
-and each critic ``Linear(obs, hidden) → ReLU → Linear(hidden, n_values)``. The N actors
-(and A2C's N critics) live in :class:`StackedLinear` layers whose parameters carry a leading
-agent dimension, so all of them are evaluated in one batched op, not a Python loop.
+and each critic ``Linear(obs, hidden) → ReLU → Linear(hidden, n_values)`` (the paper's
+networks, SPEC §6). The N actors (and A2C's N critics) live in :class:`StackedLinear`
+layers whose parameters carry a leading agent dimension, so all of them are evaluated in
+one batched op, not a Python loop.
+
+Two options go beyond the paper (``Train.layers``, ``Train.encoding``): more hidden layers
+of the same width, and, on grids, the input as one one-hot of each coordinate's cell
+(:class:`OneHotCells`) instead of the coordinates themselves. With the defaults (one layer,
+the raw observation) the networks are the paper's, weight for weight.
 
 - **A2C** (``shared_critic=False``): N actors and N critics, critic i learns agent i's returns.
 - **A2CM** (``shared_critic=True``): N actors and ONE critic trained on the team return.
@@ -23,7 +29,7 @@ whenever the torch parameters change in place (optimiser step, ``load_state_dict
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -41,7 +47,35 @@ from a2cm_phys.algos.distributions import (
 if TYPE_CHECKING:
     from a2cm_phys.config import Scenario, Train
 
-__all__ = ["ActorCritic", "StackedLinear", "make_model", "sample_categorical"]
+__all__ = ["ActorCritic", "OneHotCells", "StackedLinear", "make_model", "sample_categorical"]
+
+
+class OneHotCells:
+    """A grid observation (SPEC §5: every coordinate divided by ``size − 1``) as one one-hot
+    vector of ``size`` per coordinate: ``(..., d) → (..., d · size)``. A network then tells
+    "next to the evader" from "two cells away" with one weight per cell, where the raw
+    coordinates make it carve the arena with ReLUs."""
+
+    def __init__(self, size: int) -> None:
+        if size < 2:
+            raise ValueError(f"one-hot cells need an arena of size >= 2, got {size}")
+        self.size = size
+        self._eye = np.eye(size, dtype=np.float32)
+
+    def features(self, obs_dim: int) -> int:
+        """Length of the encoded input."""
+        return obs_dim * self.size
+
+    def torch(self, obs: torch.Tensor) -> torch.Tensor:
+        """Encode a float tensor of observations."""
+        cells = torch.round(obs * (self.size - 1)).long().clamp_(0, self.size - 1)
+        return F.one_hot(cells, self.size).to(obs.dtype).flatten(-2)
+
+    def numpy(self, obs: np.ndarray) -> np.ndarray:
+        """Encode observations in numpy (float32), as :meth:`torch` does."""
+        cells = np.rint(np.asarray(obs, dtype=np.float32) * (self.size - 1)).astype(np.intp)
+        np.clip(cells, 0, self.size - 1, out=cells)
+        return self._eye[cells].reshape(*cells.shape[:-1], -1)
 
 
 class StackedLinear(nn.Module):
@@ -98,11 +132,13 @@ class ActorCritic(nn.Module):
         obs_dim: length of the observation vector every agent sees.
         n_agents: number of agents N (one actor each).
         actions: the action distribution, or an int ``A`` for ``A`` discrete actions.
-        hidden: width of the single hidden layer of every actor and critic.
+        hidden: width of the hidden layers of every actor and critic.
         shared_critic: ``True`` for A2CM (one critic), ``False`` for A2C (N critics).
         n_values: values each critic predicts (one per reward component).
         log_std_init: initial ``log_std`` of Gaussian actors.
         generator: optional torch generator for a reproducible initialisation.
+        layers: hidden layers of every actor and critic (the paper's: 1).
+        encoding: the networks' input: the observation itself, or :class:`OneHotCells`.
     """
 
     def __init__(
@@ -116,23 +152,36 @@ class ActorCritic(nn.Module):
         n_values: int = 1,
         log_std_init: float = 0.0,
         generator: torch.Generator | None = None,
+        layers: int = 1,
+        encoding: OneHotCells | None = None,
     ) -> None:
         super().__init__()
+        if layers < 1:
+            raise ValueError(f"layers must be >= 1, got {layers}")
         dist = CategoricalActions(actions) if isinstance(actions, int) else actions
         self.dist = dist
         self.obs_dim, self.n_agents, self.hidden = obs_dim, n_agents, hidden
         self.shared_critic, self.n_values = shared_critic, n_values
+        self.encoding = encoding
+        inputs = obs_dim if encoding is None else encoding.features(obs_dim)
         c = 1 if shared_critic else n_agents
-        self.actor_hidden = StackedLinear(n_agents, obs_dim, hidden, generator)
+        self.actor_hidden = StackedLinear(n_agents, inputs, hidden, generator)
         self.actor_out = StackedLinear(n_agents, hidden, dist.n_outputs, generator)
-        self.critic_hidden = StackedLinear(c, obs_dim, hidden, generator)
+        self.critic_hidden = StackedLinear(c, inputs, hidden, generator)
         self.critic_out = StackedLinear(c, hidden, n_values, generator)
+        # Layers beyond the first are made last, so that one layer draws the paper's weights.
+        self.actor_deep = nn.ModuleList(
+            StackedLinear(n_agents, hidden, hidden, generator) for _ in range(layers - 1)
+        )
+        self.critic_deep = nn.ModuleList(
+            StackedLinear(c, hidden, hidden, generator) for _ in range(layers - 1)
+        )
         self.log_std = (
             nn.Parameter(torch.full((n_agents, dist.n_outputs), float(log_std_init)))
             if dist.has_log_std
             else None
         )
-        self._snapshot: tuple[np.ndarray, ...] | None = None
+        self._snapshot: tuple[Any, ...] | None = None
         self._snapshot_key: tuple[int, ...] | None = None
         self._cache_actor_params()
 
@@ -147,9 +196,20 @@ class ActorCritic(nn.Module):
         return self.dist.n_outputs
 
     # ------------------------------------------------------------------ torch forward
+    @property
+    def layers(self) -> int:
+        """Hidden layers of every actor and critic."""
+        return 1 + len(self.actor_deep)
+
+    def _input(self, obs: torch.Tensor) -> torch.Tensor:
+        return obs if self.encoding is None else self.encoding.torch(obs)
+
     def actor_outputs(self, obs: torch.Tensor) -> torch.Tensor:
         """Actor outputs ``(..., N, n_outputs)`` (logits or means) for ``(..., obs_dim)``."""
-        return self.actor_out(F.relu(self.actor_hidden.forward_shared(obs)))
+        h = F.relu(self.actor_hidden.forward_shared(self._input(obs)))
+        for layer in self.actor_deep:
+            h = F.relu(layer(h))
+        return self.actor_out(h)
 
 
     def distribution(self, obs: torch.Tensor) -> D.Distribution:
@@ -158,7 +218,10 @@ class ActorCritic(nn.Module):
 
     def value(self, obs: torch.Tensor) -> torch.Tensor:
         """Critic outputs ``(..., C)``, or ``(..., C, n_values)`` when ``n_values > 1``."""
-        out = self.critic_out(F.relu(self.critic_hidden.forward_shared(obs)))
+        h = F.relu(self.critic_hidden.forward_shared(self._input(obs)))
+        for layer in self.critic_deep:
+            h = F.relu(layer(h))
+        out = self.critic_out(h)
         return out.squeeze(-1) if self.n_values == 1 else out
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -186,14 +249,24 @@ class ActorCritic(nn.Module):
 
     def outputs_np(self, obs: np.ndarray) -> np.ndarray:
         """Actor outputs as numpy ``(B, N, n_outputs)`` (``(N, n_outputs)`` for 1-D ``obs``)."""
-        w1, b1, w2, b2 = self._numpy_snapshot()
-        h = np.asarray(obs, dtype=np.float32) @ w1
+        w1, b1, w2, b2, deep = self._numpy_snapshot()
+        x = np.asarray(obs, dtype=np.float32)
+        if self.encoding is not None:
+            x = self.encoding.numpy(x)
+        h = x @ w1
         h += b1
         np.maximum(h, 0.0, out=h)
+        if deep:  # agent by agent: (N, B, H) through each agent's own weights
+            lead = h.shape[:-1]
+            h = np.moveaxis(h.reshape(-1, self.n_agents, self.hidden), 1, 0)
+            for w, b in deep:
+                h = np.matmul(h, w)
+                h += b
+                np.maximum(h, 0.0, out=h)
+            h = np.moveaxis(h, 0, 1).reshape(*lead, self.n_agents * self.hidden)
         out = h @ w2
         out += b2
         return out.reshape(*out.shape[:-1], self.n_agents, self.dist.n_outputs)
-
 
     def action_probs_np(self, obs: np.ndarray) -> np.ndarray:
         """Softmax action probabilities ``(B, N, A)`` of discrete actors, as numpy float64."""
@@ -205,10 +278,18 @@ class ActorCritic(nn.Module):
 
     def refresh_snapshot(self) -> None:
         """Rebuild the numpy copy of the actor weights used by :meth:`act` now."""
-        n, h, o, d = self.n_agents, self.hidden, self.dist.n_outputs, self.obs_dim
+        n, h, o = self.n_agents, self.hidden, self.dist.n_outputs
+        d = self.actor_hidden.in_features
         with torch.no_grad():
             t_w1, t_b1, t_w2, t_b2 = (p.detach().cpu().numpy() for p in self._actor_params[:4])
-            log_std = self._actor_params[4] if len(self._actor_params) > 4 else None
+            deep = [
+                (
+                    np.ascontiguousarray(layer.weight.detach().cpu().numpy().transpose(0, 2, 1)),
+                    layer.bias.detach().cpu().numpy()[:, None, :].copy(),
+                )
+                for layer in self.actor_deep
+            ]
+            log_std = self.log_std
             self._snapshot_log_std = (
                 None if log_std is None else log_std.detach().cpu().numpy().copy()
             )
@@ -221,6 +302,7 @@ class ActorCritic(nn.Module):
             t_b1.reshape(n * h).copy(),
             w2,
             t_b2.reshape(n * o).copy(),
+            deep,
         )
         self._snapshot_key = self._actor_versions()
 
@@ -242,13 +324,15 @@ class ActorCritic(nn.Module):
             self.actor_out.weight,
             self.actor_out.bias,
         ]
+        for layer in self.actor_deep:
+            params += [layer.weight, layer.bias]
         if self.log_std is not None:
             params.append(self.log_std)
         self._actor_params = tuple(params)
         self._snapshot = None
         self._snapshot_log_std = None
 
-    def _numpy_snapshot(self) -> tuple[np.ndarray, ...]:
+    def _numpy_snapshot(self) -> tuple[Any, ...]:
         if self._snapshot is None or self._snapshot_key != self._actor_versions():
             self.refresh_snapshot()
         assert self._snapshot is not None
@@ -293,5 +377,7 @@ def make_model(
         n_values=len(REWARD_PARTS) if train_cfg.split_rewards else 1,
         log_std_init=resolve_train(scenario, train_cfg).log_std_init,
         generator=generator,
+        layers=train_cfg.layers,
+        encoding=OneHotCells(scenario.size) if train_cfg.encoding == "onehot" else None,
     )
     return model.to(train_cfg.device)

@@ -72,9 +72,10 @@ def memory_estimate(scenario: Scenario, kind: str, moves: int) -> float:
         return float(base + s * moves * 24)
     if kind == "product":
         return float(base + 3 * s * COLUMNS * 8)
-    full = s * a**n  # (state, joint action) pairs: building the sparse matrix
+    full = s * a**n  # (state, joint action) pairs: building the sparse matrix, and the
+    # next states, weights and sorting order it keeps (to be reweighted)
     swaps = full * 24 * moves * min(1.0, n / scenario.size**2)
-    return float(base + full * 48 + swaps)
+    return float(base + full * 56 + swaps)
 
 
 def check_size(
@@ -150,7 +151,17 @@ class PursuerStep:
         if self.kind == "product":
             self._build_matrices()
         else:
+            self._structure: tuple[Any, ...] | None = None  # see _csr
+            self.apart: np.ndarray | None = None  # see _fold_collisions
             self._build_sparse()
+        self._weigh()
+
+    def _weigh(self) -> None:
+        """The general kind's matrix of ``weight``, and the capture and end probabilities
+        of a step, with collisions folded into the weights in ``terminate`` mode."""
+        if self.kind == "general":
+            self.matrix = self._csr(self.weight)
+            self._swap_entries()
         ones = self.valid.astype(np.float64)[:, None]  # 1 where the episode goes on
         self.p_capture = self.p_end = 1.0 - self.expect(ones)[..., 0]
         if self.terminate:  # now also end the episode on collisions
@@ -215,7 +226,6 @@ class PursuerStep:
             index += (self.pmove[cells[i]] * c ** (n - i)).reshape(shape)
             weight *= self.table[:, i, :].reshape(shape)
         self.index, self.weight = index.reshape(s, -1), weight.reshape(s, -1)
-        self.matrix = self._csr(self.weight)
         # Swaps: pursuer i moves onto the evader's cell e as the evader moves onto p_i.
         # A capture the matrix cannot see (the next state is a valid one): those
         # (state, joint action) entries are subtracted again, sparsely.
@@ -231,9 +241,6 @@ class PursuerStep:
                 hit |= swap.reshape((len(rows),) + (1,) * i + (a,) + (1,) * (n - 1 - i))
             r, j = np.nonzero(hit.reshape(len(rows), a**n))
             self.swaps.append((rows[r], rows[r] * a**n + j))
-        self._swap_entries()
-        if not self.terminate:
-            del self.index, self.weight  # only the collision mask still needs them
 
     def _swap_entries(self) -> None:
         """Per evader move: the swap entries' rows, columns and weights."""
@@ -242,21 +249,31 @@ class PursuerStep:
 
     def _csr(self, weight: np.ndarray) -> Any:
         """``weight (S, J)`` at columns ``index (S, J)`` as a torch CSR matrix, duplicate
-        columns (moves that bump into a wall) summed."""
+        columns (moves that bump into a wall) summed. The matrix's structure depends on the
+        arena alone: it is sorted out once, and a later call only sums new weights."""
         import torch
 
-        order = np.argsort(self.index, axis=1, kind="stable")
-        cols = np.take_along_axis(self.index, order, axis=1)
-        first = np.ones(cols.shape, dtype=bool)
-        first[:, 1:] = cols[:, 1:] != cols[:, :-1]
-        starts = np.flatnonzero(first)
-        values = np.add.reduceat(np.take_along_axis(weight, order, axis=1).ravel(), starts)
-        crow = np.concatenate(([0], np.cumsum(first.sum(axis=1))))
+        if self._structure is None:
+            order = np.argsort(self.index, axis=1, kind="stable")
+            cols = np.take_along_axis(self.index, order, axis=1)
+            first = np.ones(cols.shape, dtype=bool)
+            first[:, 1:] = cols[:, 1:] != cols[:, :-1]
+            starts = np.flatnonzero(first)
+            crow = np.concatenate(([0], np.cumsum(first.sum(axis=1))))
+            order += np.arange(self.n_states)[:, None] * order.shape[1]
+            self._structure = (
+                order.ravel(),
+                starts,
+                torch.from_numpy(crow.astype(np.int32)),
+                torch.from_numpy(cols.ravel()[starts].astype(np.int32)),
+            )
+        flat_order, starts, crow, cols = self._structure
+        values = np.add.reduceat(weight.ravel()[flat_order], starts)
         with warnings.catch_warnings():  # "sparse CSR support is in beta"
             warnings.simplefilter("ignore", UserWarning)
             return torch.sparse_csr_tensor(
-                torch.from_numpy(crow.astype(np.int32)),
-                torch.from_numpy(cols.ravel()[starts].astype(np.int32)),
+                crow,
+                cols,
                 torch.from_numpy(values),
                 size=(self.n_states, self.n_states),
                 check_invariants=False,
@@ -265,19 +282,38 @@ class PursuerStep:
     def _fold_collisions(self) -> None:
         """``terminate`` mode: a step in which two pursuers meet ends the episode."""
         a, n, s = self.a, self.n, self.n_states
-        cells = state_cells(self.scenario)
-        pair = pair_table(self.scenario) == 0
-        ok = np.ones((s,) + (a,) * n, dtype=bool)
-        for i in range(n):
-            for k in range(i + 1, n):
-                ai = np.arange(a).reshape((1,) * i + (a,) + (1,) * (n - 1 - i))
-                ak = np.arange(a).reshape((1,) * k + (a,) + (1,) * (n - 1 - k))
-                pi, pk = (cells[h].reshape((s,) + (1,) * n) for h in (i, k))
-                ok &= pair[pi, ai, pk, ak]
-        self.weight *= ok.reshape(s, -1)
+        if self.apart is None:  # (S, J): no two pursuers meet
+            cells = state_cells(self.scenario)
+            pair = pair_table(self.scenario) == 0
+            ok = np.ones((s,) + (a,) * n, dtype=bool)
+            for i in range(n):
+                for k in range(i + 1, n):
+                    ai = np.arange(a).reshape((1,) * i + (a,) + (1,) * (n - 1 - i))
+                    ak = np.arange(a).reshape((1,) * k + (a,) + (1,) * (n - 1 - k))
+                    pi, pk = (cells[h].reshape((s,) + (1,) * n) for h in (i, k))
+                    ok &= pair[pi, ai, pk, ak]
+            self.apart = ok.reshape(s, -1)
+        self.weight = self.weight * self.apart
         self.matrix = self._csr(self.weight)
         self._swap_entries()
-        del self.index, self.weight
+
+    def reweight(self, pursuer_probs: np.ndarray) -> None:
+        """The same step under another pursuer table of the same arena (general kind): the
+        sparse structure is kept, only the weights are recomputed (a fraction of building).
+        """
+        if self.kind != "general":
+            raise ValueError(f"only the general kind can be reweighted, this one is {self.kind}")
+        self.table = check_table(self.scenario, pursuer_probs, "pursuers")
+        self.weight = self.joint_weights(np.arange(self.n_states))
+        self._weigh()
+
+    def joint_weights(self, rows: np.ndarray) -> np.ndarray:
+        """``(R, A^N)`` probabilities of the pursuers' joint actions in states ``rows``, in
+        the joint index order ``(a_0 · A + a_1) · A + …``."""
+        w = self.table[rows, 0]
+        for i in range(1, self.n):
+            w = (w[:, :, None] * self.table[rows, i, None, :]).reshape(len(rows), -1)
+        return w
 
     def _general(self, x: np.ndarray) -> np.ndarray:
         """All evader moves at once: ``x`` shifted along the evader's axis by each move,

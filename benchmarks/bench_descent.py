@@ -1,0 +1,140 @@
+"""Grid self-play with exploitability descent (issue 14's targets), measured exactly.
+
+    python benchmarks/bench_descent.py [--seeds 0-4] [--jobs 2] [--logdir logs/bench-descent]
+        [--set train.KEY=VALUE ...] [--label NAME]
+
+Trains ``grid_vs`` once per seed (``python -m a2cm_phys.train --scenario grid_vs --seed S
+--preset descent`` with the ``--set`` options, no episode log; finished runs are reused,
+unfinished ones resumed), then measures each
+run's final policies with the exact solvers, on the scenario's own 1,000-step horizon:
+
+- the pursuers' **worst case**: the value of the evader's exact best response to their
+  sampled actors (``oracle --best-response evader --pursuers RUN``), beside the oracle's
+  (the team optimal against the random evader: 10);
+- the pursuers' expected capture time against the **random** evader, exactly, beside the
+  optimum (2.939);
+- the learned **evader** against the oracle's pursuers, exactly, beside the random and
+  fleeing evaders against the same team.
+
+A row per run, then medians over seeds with 95% percentile-bootstrap intervals. Wall times
+are those of the training commands, ``--jobs`` at a time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from a2cm_phys.config import load_scenario
+from a2cm_phys.evaluate import load_run
+from a2cm_phys.oracle import load_or_solve
+from a2cm_phys.solve.best_response import evader_best_response, evaluate_tables
+from a2cm_phys.solve.tables import (
+    joint_policy_table,
+    model_table,
+    scripted_evader_table,
+    uniform_table,
+)
+from a2cm_phys.stats import STATISTICS, bootstrap_ci
+from a2cm_phys.sweep import parse_seeds
+
+PRESET = "descent"
+"""The training preset of the runs (``config.PRESETS``); ``--set`` options win over it."""
+
+
+def train(seed: int, run_dir: Path, assignments: list[str]) -> float:
+    """Train one seed into ``run_dir`` (skipped if it finished); the wall time (s)."""
+    summary = run_dir / "summary.json"
+    if summary.exists() and json.loads(summary.read_text())["status"] == "done":
+        return float(json.loads(summary.read_text())["wall_time_s"])
+    command = [
+        sys.executable, "-m", "a2cm_phys.train", "--scenario", "grid_vs", "--seed", str(seed),
+        "--no-record", "--no-progress",
+        *(["--resume", str(run_dir)] if (run_dir / "checkpoint.pt").exists()
+          else ["--run-dir", str(run_dir), "--preset", PRESET,
+                *(["--set", *assignments] if assignments else [])]),
+    ]  # fmt: skip
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+    return float(json.loads(summary.read_text())["wall_time_s"])
+
+
+def measure(run_dir: Path, oracle_table: np.ndarray) -> dict[str, float]:
+    """The exact figures of one run's final actors."""
+    run = load_run(run_dir)
+    game = load_scenario("grid_vs", {"evader": "random"})  # the solvers' rules, any table
+    pursuers = model_table(game, run.pursuers, game.pursuers)
+    evader = model_table(game, run.evader, 1)
+    worst = evader_best_response(game, pursuers)
+    random = uniform_table(game, 1)
+    return {
+        "worst_case": worst.value_from_start,
+        "worst_case_p_capture": worst.p_capture_from_start,
+        "vs_random": float(evaluate_tables(game, pursuers, random).values[worst.start]),
+        "evader_vs_oracle": float(evaluate_tables(game, oracle_table, evader).values[worst.start]),
+    }
+
+
+def median_ci(values: list[float]) -> str:
+    """``median [low, high]`` of per-seed values (bootstrap over seeds)."""
+    low, high = bootstrap_ci(np.asarray(values), STATISTICS["median"])
+    return f"{np.median(values):.3f} [{low:.3f}, {high:.3f}]"
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--seeds", default="0-4")
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--logdir", default="logs/bench-descent")
+    p.add_argument("--set", nargs="+", action="extend", default=[], metavar="KEY=VALUE")
+    p.add_argument("--label", default="descent")
+    args = p.parse_args()
+    seeds = parse_seeds(args.seeds)
+    assignments = args.set
+    root = Path(args.logdir) / args.label
+    root.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(args.jobs) as pool:
+        walls = list(pool.map(lambda s: train(s, root / f"s{s}", assignments), seeds))
+    print(f"trained {len(seeds)} runs in {time.perf_counter() - t0:.0f} s ({args.jobs} at a time)")
+
+    game = load_scenario("grid_vs", {"evader": "random"})
+    oracle = joint_policy_table(game, load_or_solve(load_scenario("grid")).policy)
+    start = evader_best_response(game, oracle)
+    reference = {
+        "oracle worst case": start.value_from_start,
+        "random evader vs oracle": float(
+            evaluate_tables(game, oracle, uniform_table(game, 1)).values[start.start]
+        ),
+        "fleeing evader vs oracle": float(
+            evaluate_tables(game, oracle, scripted_evader_table(game, "flee")).values[start.start]
+        ),
+    }
+    rows = [measure(root / f"s{s}", oracle) for s in seeds]
+    print(f"command: python benchmarks/bench_descent.py --seeds {args.seeds}"
+          + "".join(f" --set {a}" for a in assignments))  # fmt: skip
+    print("references: " + ", ".join(f"{k} {v:.3f}" for k, v in reference.items()))
+    print("\n| seed | worst case (exact) | P(capture) within 1,000 | vs random evader (exact) |"
+          " learned evader vs oracle (exact) | wall (s) |")  # fmt: skip
+    print("|---|---|---|---|---|---|")
+    for seed, row, wall in zip(seeds, rows, walls, strict=True):
+        print(
+            f"| {seed} | {row['worst_case']:.3f} | {row['worst_case_p_capture']:.6f} |"
+            f" {row['vs_random']:.3f} | {row['evader_vs_oracle']:.3f} | {wall:.0f} |"
+        )
+    cols = ("worst_case", "worst_case_p_capture", "vs_random", "evader_vs_oracle")
+    print(
+        "| median [95% CI] | "
+        + " | ".join(median_ci([r[c] for r in rows]) for c in cols)
+        + f" | {np.median(walls):.0f} |"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,253 @@
+"""Exploitability descent (issue 14): the exact gradient of a pursuer team's worst case,
+checked against the rules enumerated by hand, and its use in grid self-play."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+import torch
+
+from a2cm_phys.config import ConfigError, load_scenario, load_train
+from a2cm_phys.descent import ExploitabilityDescent, check_descent
+from a2cm_phys.envs.grid import GridRules
+from a2cm_phys.solve.best_response import evader_best_response
+from a2cm_phys.solve.descent import WorstCaseGradient
+from a2cm_phys.solve.tables import model_table, n_states, start_state, state_cells
+from a2cm_phys.teams import make_teams
+
+SMALL = {"size": 3, "pursuers": 2, "max_steps": 300}
+
+
+def small(mode: str = "off"):
+    return load_scenario("grid_vs", {**SMALL, "collisions": {"mode": mode}})
+
+
+def random_table(scenario, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return rng.dirichlet(np.ones(scenario.actions), size=(n_states(scenario), scenario.pursuers))
+
+
+def enumerate_rules(scenario):
+    """For every state, joint action and evader move, by ``GridRules.apply`` one at a time:
+    the next state and whether the episode goes on."""
+    n, a, s = scenario.pursuers, scenario.actions, n_states(scenario)
+    cells = state_cells(scenario)
+    rules = GridRules(scenario)
+    joints = list(itertools.product(range(a), repeat=n))
+    nxt = np.zeros((s, len(joints), a), dtype=np.int64)
+    goes_on = np.zeros((s, len(joints), a), dtype=bool)
+    shape = (scenario.size**2,) * (n + 1)
+    for j, joint in enumerate(joints):
+        for b in range(a):
+            new, captured, collisions, _ = rules.apply(
+                cells.copy(), np.tile(joint, (s, 1)), np.full(s, b)
+            )
+            nxt[:, j, b] = np.ravel_multi_index(tuple(new), shape)
+            ends = captured | ((scenario.collisions.mode == "terminate") & (collisions > 0))
+            goes_on[:, j, b] = ~ends
+    return nxt, goes_on
+
+
+def joint_probs(table: np.ndarray) -> np.ndarray:
+    n = table.shape[1]
+    out = table[:, 0]
+    for i in range(1, n):
+        out = (out[:, :, None] * table[:, i, None, :]).reshape(len(table), -1)
+    return out
+
+
+def brute_force(scenario, table, gamma, sweeps):
+    """Values, best moves, per-pursuer advantages and discounted visits, by enumeration."""
+    nxt, goes_on = enumerate_rules(scenario)
+    valid = ~np.any(state_cells(scenario)[:-1] == state_cells(scenario)[-1], axis=0)
+    w = joint_probs(table)
+    v = np.zeros(len(table))
+    for _ in range(sweeps):
+        q = np.einsum("sj,sjb->sb", w, 1 + gamma * goes_on * v[nxt])
+        v = np.where(valid, q.max(1), 0.0)
+    choice = q.argmax(1)
+    rows = np.arange(len(table))
+    step = 1 + gamma * goes_on[rows, :, choice] * v[nxt[rows, :, choice]]  # (S, J)
+    n, a = scenario.pursuers, scenario.actions
+    step = step.reshape((len(table),) + (a,) * n)
+    assert n == 2
+    q_i = np.stack(
+        [np.einsum("sab,sb->sa", step, table[:, 1]), np.einsum("sab,sa->sb", step, table[:, 0])],
+        axis=1,
+    )
+    adv = q_i - (q_i * table).sum(-1, keepdims=True)
+    visits, d = np.zeros(len(table)), np.zeros(len(table))
+    d[start_state(scenario)] = 1.0
+    for _ in range(400):
+        visits += d
+        flow = d[:, None] * w * goes_on[rows, :, choice]
+        d = gamma * np.bincount(nxt[rows, :, choice].ravel(), flow.ravel(), len(table))
+    return v, choice, adv, visits
+
+
+@pytest.mark.parametrize("mode", ["off", "terminate"])
+def test_undiscounted_values_are_the_exact_best_response(mode: str) -> None:
+    scenario = small(mode)
+    table = random_table(scenario, 0)
+    gradient = WorstCaseGradient(scenario, 1.0, sweeps=scenario.max_steps)
+    value = gradient.refresh(table)
+    br = evader_best_response(scenario, table)
+    np.testing.assert_allclose(gradient.values, br.values, rtol=0, atol=1e-8)
+    assert value == pytest.approx(br.value_from_start, abs=1e-8)
+
+
+@pytest.mark.parametrize("mode", ["off", "terminate"])
+def test_advantages_and_visits_match_enumeration(mode: str) -> None:
+    scenario, gamma = small(mode), 0.9
+    table = random_table(scenario, 1)
+    gradient = WorstCaseGradient(scenario, gamma, sweeps=200, trajectories=40_000, horizon=200)
+    gradient.refresh(table)
+    v, choice, adv, visits = brute_force(scenario, table, gamma, 200)
+    np.testing.assert_allclose(gradient.values, v, atol=1e-10)
+    np.testing.assert_array_equal(gradient.choice, choice)
+    rows = np.arange(len(table))
+    np.testing.assert_allclose(gradient.advantages(rows), adv, atol=1e-10)
+    # sampled visits: the discounted counts of 40,000 games, per game, near the exact law
+    got_rows, counts = gradient.visits(np.random.default_rng(0))
+    sampled = np.zeros(len(table))
+    sampled[got_rows] = counts
+    assert np.abs(sampled - visits).sum() < 0.02 * visits.sum()
+
+
+def test_states_drawn_for_the_gradient_follow_the_visits() -> None:
+    """Each call draws 100 of 300 states; their weights sum to the visits' total, and over
+    2,000 calls they average to the visits (unbiased)."""
+    gradient = WorstCaseGradient(small(), 0.9, samples=100)
+    rng = np.random.default_rng(4)
+    rows = np.sort(rng.choice(10_000, 300, replace=False))
+    weights = rng.exponential(size=300)
+    same = gradient.sample(rng, rows[:100], weights[:100])  # no more than the draws: all
+    assert np.array_equal(same[0], rows[:100]) and np.array_equal(same[1], weights[:100])
+    mean = np.zeros(300)
+    for _ in range(2_000):
+        drawn_rows, drawn = gradient.sample(rng, rows, weights)
+        assert len(drawn_rows) <= 100 and drawn.sum() == pytest.approx(weights.sum())
+        mean[np.searchsorted(rows, drawn_rows)] += drawn / 2_000
+    # 200,000 draws over 300 states: an L1 error of about 0.03 of the total
+    assert np.abs(mean - weights).sum() < 0.06 * weights.sum()
+
+
+def test_the_gradient_is_the_derivative_of_the_worst_case() -> None:
+    """Σ_s d(s) Σ_i Σ_a δ_i(a|s) A_i(s, a) against a finite difference of V(s₀) along δ."""
+    scenario, gamma = small(), 0.9
+    table = random_table(scenario, 2)
+    v, _, adv, visits = brute_force(scenario, table, gamma, 300)
+    rng = np.random.default_rng(3)
+    delta = rng.normal(size=table.shape)
+    delta -= delta.mean(-1, keepdims=True)  # stays on the simplex
+    predicted = (visits[:, None, None] * delta * adv).sum()
+    eps = 1e-6
+    moved = WorstCaseGradient(scenario, gamma, sweeps=300)
+    start = WorstCaseGradient(scenario, gamma, sweeps=300)
+    finite = (moved.refresh(table + eps * delta) - start.refresh(table)) / eps
+    assert predicted == pytest.approx(finite, rel=1e-4)
+    assert start.refresh(table) == pytest.approx(v[start_state(scenario)])
+
+
+def test_descent_steps_lower_the_worst_case() -> None:
+    """Ten steps of the actors against the exact best response make the exact worst case
+    (horizon 300) of a fresh team fall by more than half."""
+    scenario = small()
+    cfg = load_train({"layers": 2, "hidden": 64, "encoding": "onehot", "descent_lr": 3e-3,
+                      "descent_steps": 5, "descent_every": 1})  # fmt: skip
+    pursuers, _ = make_teams(scenario, cfg)
+    descent = ExploitabilityDescent(scenario, cfg, pursuers.model, seed=0)
+
+    def worst_case() -> float:
+        table = model_table(scenario, pursuers.model, scenario.pursuers)
+        return evader_best_response(scenario, table).value_from_start
+
+    before = worst_case()
+    for _ in range(10):
+        metrics = descent.step()
+    after = worst_case()
+    assert metrics["descent_states"] > 0
+    assert after < 0.5 * before, (before, after)
+
+
+def test_descent_state_round_trips() -> None:
+    scenario = small()
+    cfg = load_train({"descent_every": 1})
+    pursuers, _ = make_teams(scenario, cfg)
+    a = ExploitabilityDescent(scenario, cfg, pursuers.model, seed=0)
+    a.step()
+    b = ExploitabilityDescent(scenario, cfg, make_teams(scenario, cfg)[0].model, seed=9)
+    b.load_state_dict(a.state_dict())
+    np.testing.assert_array_equal(a.gradient.values, b.gradient.values)
+    assert a.rng.random() == b.rng.random()
+    assert torch.equal(
+        a.optimizer.state_dict()["state"][0]["exp_avg"],
+        b.optimizer.state_dict()["state"][0]["exp_avg"],
+    )
+
+
+@pytest.mark.parametrize(
+    ("scenario", "options", "key"),
+    [
+        ("phys_vs", {"descent_every": 5}, "descent_every"),
+        ("grid", {"descent_every": 5}, "descent_every"),
+        ("phys", {"encoding": "onehot"}, "encoding"),
+    ],
+)
+def test_descent_and_one_hot_inputs_need_a_grid(scenario: str, options: dict, key: str) -> None:
+    with pytest.raises(ConfigError, match=f"key '{key}'"):
+        check_descent(load_scenario(scenario), load_train(options))
+
+
+def test_descent_refuses_arenas_beyond_the_exact_solver() -> None:
+    big = load_scenario("grid_vs", {"size": 9})
+    with pytest.raises(ConfigError, match=r"key 'descent_every'.*too large"):
+        check_descent(big, load_train({"descent_every": 5}))
+
+
+def test_in_self_play_the_pursuers_learn_by_descent_alone(tmp_path) -> None:
+    """Updates 1 and 3 step only the evader; update 2 and 4 also the pursuers' actors, by
+    descent; the pursuers' learner (its critic) never moves. The summary says so."""
+    from a2cm_phys.trainer import Trainer
+
+    scenario = load_scenario("grid_vs", {**SMALL, "max_steps": 50})
+    cfg = load_train({"num_envs": 4, "batch_size": 32, "updates": 4, "descent_every": 2})
+    trainer = Trainer(scenario, cfg, tmp_path, record=False)
+
+    def weights(model, prefix: str) -> list[torch.Tensor]:
+        return [p.detach().clone() for k, p in model.named_parameters() if k.startswith(prefix)]
+
+    history = []
+    update = trainer._one_update
+
+    def spy(on_step: object) -> None:
+        before = [weights(trainer.model, p) for p in ("actor_", "critic_")]
+        evader = weights(trainer.evader.model, "actor_")
+        update(on_step)
+        after = [weights(trainer.model, p) for p in ("actor_", "critic_")]
+        moved = [not all(torch.equal(a, b) for a, b in zip(x, y, strict=True))
+                 for x, y in zip(before, after, strict=True)]  # fmt: skip
+        history.append((*moved, not all(
+            torch.equal(a, b)
+            for a, b in zip(evader, weights(trainer.evader.model, "actor_"), strict=True)
+        ), "descent_value" in trainer.last_metrics))  # fmt: skip
+
+    trainer._one_update = spy  # type: ignore[method-assign]
+    assert trainer.run() == "done"
+    # (pursuers' actors moved, their critic moved, the evader moved, descent logged)
+    assert history == [(False, False, True, False), (True, False, True, True)] * 2
+    summary = trainer.summary()
+    assert "exploitability descent every 2 updates" in summary["opponents"]
+    assert summary["descent_value"] == trainer.last_metrics["descent_value"] > 0
+
+
+def test_the_descent_preset_is_grid_self_play_with_deeper_one_hot_actors() -> None:
+    from a2cm_phys.config import preset
+
+    cfg = load_train(preset("descent"))
+    assert cfg.descent_every > 0 and cfg.layers == 2 and cfg.encoding == "onehot"
+    check_descent(load_scenario("grid_vs"), cfg)  # fine there
+    with pytest.raises(ConfigError, match="key 'descent_every'"):
+        check_descent(load_scenario("grid"), cfg)
