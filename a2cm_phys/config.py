@@ -33,6 +33,7 @@ Control = Literal["discrete", "continuous"]
 Optimizer = Literal["rmsprop", "adam"]
 Schedule = Literal["constant", "linear"]
 Encoding = Literal["xy", "onehot"]
+DescentTeams = Literal["pursuers", "both"]
 
 DEFAULT_DT = {"discrete": 1.0, "continuous": 0.1}
 """The control period ``physics.dt`` (s) of each control type when a scenario omits it."""
@@ -245,10 +246,12 @@ class Train:
     pool_latest: float = 0.5  # probability that an update is latest against latest
     # Grid self-play: exploitability descent (a2cm_phys/descent.py). The pursuers' actors
     # learn only by stepping down the discounted value of the evader's exact best response
-    # to them, every K updates; the evader learns from the rollouts.
+    # to them, every K updates; the evader learns from the rollouts, or ("both") by
+    # stepping up the value of the pursuers' exact best response to it.
     descent_every: int = 0  # 0: off (the pursuers learn from their rollouts)
     descent_steps: int = 1  # actor steps per best response
     descent_lr: float = 1e-3  # Adam's step size for them
+    descent_teams: DescentTeams = "pursuers"  # who learns by descent
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of the first impossible value."""
@@ -342,6 +345,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "descent_every": 8,
         "descent_steps": 2,
         "descent_lr": 1e-3,
+        "descent_teams": "both",
         "layers": 2,
         "hidden": 128,
         "encoding": "onehot",

@@ -23,6 +23,13 @@ The actor loss, over the visited states ``s`` with their discounted visit weight
 
 ``A_i`` the exact advantage of pursuer ``i``'s action against the best response: its
 gradient is that of the best response's value, divided by the visits' total.
+
+With ``descent_teams = "both"`` the evader learns the same way, from the other side: at
+the same steps the pursuers' exact best response to its current actor is solved (the
+oracle's backup, warm-started), and the evader's actor takes ``descent_steps`` Adam steps
+*up* its value (``L = −Σ_s w(s) Σ_b σ(b | s) · A(s, b)``), logged as
+``evader_descent_value``; its rollout learner is not stepped either. Both teams then
+descend their exploitability at once, as in Lockhart et al.'s exploitability descent.
 """
 
 from __future__ import annotations
@@ -35,12 +42,17 @@ import torch
 from .algos import ActorCritic
 from .config import ConfigError, Scenario, Train
 from .solve.model import TooLargeError, UnsupportedError
-from .solve.tables import joint_observations, model_table
+from .solve.tables import joint_observations, model_table, uniform_table
 
 
 def check_descent(scenario: Scenario, cfg: Train) -> None:
     """Exploitability descent and one-hot inputs need a grid (and descent one the exact
     solver can hold): a :class:`ConfigError` naming the key if not."""
+    if cfg.descent_teams == "both" and not cfg.descent_every:
+        raise ConfigError(
+            "training options: key 'descent_teams': 'both' needs exploitability descent"
+            " (descent_every > 0, or --preset descent)"
+        )
     if cfg.descent_every:
         if scenario.mode != "grid" or scenario.evader != "learned":
             raise ConfigError(
@@ -54,6 +66,8 @@ def check_descent(scenario: Scenario, cfg: Train) -> None:
             check_size(scenario, "general")
         except (TooLargeError, UnsupportedError) as err:
             raise ConfigError(f"training options: key 'descent_every': {err}") from None
+        if cfg.descent_teams == "both":
+            _check_evader_descent(scenario)
     if cfg.encoding == "onehot" and scenario.mode != "grid":
         raise ConfigError(
             "training options: key 'encoding': one-hot cells need a grid, and scenario"
@@ -61,52 +75,126 @@ def check_descent(scenario: Scenario, cfg: Train) -> None:
         )
 
 
-class ExploitabilityDescent:
-    """The pursuers' actors stepping down the value of the evader's exact best response.
+def _check_evader_descent(scenario: Scenario) -> None:
+    """The evader's descent needs the oracle against a table, and a worst case that
+    capture time measures (no collision may end the episode)."""
+    if scenario.collisions.mode == "terminate":
+        raise ConfigError(
+            "training options: key 'descent_teams': with collisions.mode = 'terminate' the"
+            " pursuers' best response could end the episode by colliding, so the evader has"
+            " no worst case to raise (use descent_teams = 'pursuers')"
+        )
+    from .solve.model import GridModel
 
-    ``model`` is the pursuers' actor–critic (its actors are stepped in place). ``seed``
-    seeds the simulated games that estimate the visits, independently of the rollouts.
+    try:
+        GridModel(scenario, evader_probs=uniform_table(scenario, 1))
+    except (TooLargeError, UnsupportedError) as err:
+        raise ConfigError(f"training options: key 'descent_teams': {err}") from None
+
+
+class ExploitabilityDescent:
+    """The pursuers' actors stepping down the value of the evader's exact best response
+    (and with ``descent_teams = "both"`` the evader's actor stepping up the value of the
+    pursuers' exact best response).
+
+    ``model`` is the pursuers' actor–critic, ``evader`` the learned evader's (their actors
+    are stepped in place; ``evader`` is needed with ``"both"`` only). ``seed`` seeds the
+    simulated games that estimate the visits, independently of the rollouts.
     """
 
-    def __init__(self, scenario: Scenario, cfg: Train, model: ActorCritic, seed: int) -> None:
-        from .solve.descent import WorstCaseGradient
+    def __init__(
+        self,
+        scenario: Scenario,
+        cfg: Train,
+        model: ActorCritic,
+        seed: int,
+        evader: ActorCritic | None = None,
+    ) -> None:
+        from .solve.descent import EvaderGradient, WorstCaseGradient
 
         self.scenario, self.model, self.steps = scenario, model, cfg.descent_steps
         self.gradient = WorstCaseGradient(scenario, cfg.gamma)
-        actors = [p for name, p in model.named_parameters() if name.startswith("actor_")]
-        self.optimizer = torch.optim.Adam(actors, lr=cfg.descent_lr)
+        self.optimizer = _actor_adam(model, cfg.descent_lr)
         self.rng = np.random.default_rng([seed, 3])
         self.last_value = float("nan")  # descent_value of the last step
+        self.last_evader_value = float("nan")  # evader_descent_value of the last step
         self._obs = torch.from_numpy(joint_observations(scenario))
+        self.evader = evader if cfg.descent_teams == "both" else None
+        if cfg.descent_teams == "both" and evader is None:
+            raise ValueError("descent_teams = 'both' needs the evader's model")
+        if self.evader is not None:
+            self.evader_gradient = EvaderGradient(scenario, cfg.gamma, self.gradient)
+            self.evader_optimizer = _actor_adam(self.evader, cfg.descent_lr)
+            # its own stream: the pursuers' descent is the same whether the evader's runs
+            self.evader_rng = np.random.default_rng([seed, 4])
 
     def step(self) -> dict[str, float]:
-        """One best response and ``descent_steps`` actor steps; the metrics to log."""
+        """One best response to each learning team and ``descent_steps`` actor steps each;
+        the metrics to log."""
         table = model_table(self.scenario, self.model, self.scenario.pursuers)
         value = self.last_value = self.gradient.refresh(table)
         rows, visits = self.gradient.visits(self.rng)
         rows, visits = self.gradient.sample(self.rng, rows, visits)
-        advantages = torch.from_numpy(self.gradient.advantages(rows)).float()
+        advantages = self.gradient.advantages(rows)
+        self._ascend(self.model, self.optimizer, rows, visits, advantages, sign=1.0)
+        metrics = {"descent_value": value, "descent_states": float(len(rows))}
+        if self.evader is not None:
+            e = self.evader_gradient
+            value = self.last_evader_value = e.refresh(model_table(self.scenario, self.evader, 1))
+            rows, visits = self.gradient.sample(self.evader_rng, *e.visits(self.evader_rng))
+            advantages = e.advantages(rows)[:, None, :]  # one agent
+            self._ascend(self.evader, self.evader_optimizer, rows, visits, advantages, -1.0)
+            metrics.update(evader_descent_value=value, evader_descent_states=float(len(rows)))
+        return metrics
+
+    def _ascend(
+        self,
+        model: ActorCritic,
+        optimizer: torch.optim.Optimizer,
+        rows: np.ndarray,
+        visits: np.ndarray,
+        advantages: np.ndarray,
+        sign: float,
+    ) -> None:
+        """``descent_steps`` steps on ``sign · Σ w π A``: down (+1) or up (−1) the value."""
+        adv = torch.from_numpy(advantages).float()
         weights = torch.from_numpy(visits / visits.sum()).float()[:, None, None]
         obs = self._obs[rows]
         for _ in range(self.steps):
-            probs = torch.softmax(self.model.actor_outputs(obs), dim=-1)
-            loss = (weights * probs * advantages).sum()
-            self.optimizer.zero_grad()
+            probs = torch.softmax(model.actor_outputs(obs), dim=-1)
+            loss = sign * (weights * probs * adv).sum()
+            optimizer.zero_grad()
             loss.backward()
-            self.optimizer.step()
-        return {"descent_value": value, "descent_states": float(len(rows))}
+            optimizer.step()
 
     def state_dict(self) -> dict[str, Any]:
-        """What a resume needs: the optimiser, the sampling generator and the values the
-        next best response starts from."""
-        return {
+        """What a resume needs: the optimisers, the sampling generator and the values the
+        next best responses start from."""
+        state = {
             "optimizer": self.optimizer.state_dict(),
             "rng": self.rng.bit_generator.state,
             "values": torch.from_numpy(self.gradient.values.copy()),
         }
+        if self.evader is not None:
+            values = self.evader_gradient.values
+            state["evader_optimizer"] = self.evader_optimizer.state_dict()
+            state["evader_rng"] = self.evader_rng.bit_generator.state
+            state["evader_values"] = None if values is None else torch.from_numpy(values.copy())
+        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Continue from :meth:`state_dict`."""
         self.optimizer.load_state_dict(state["optimizer"])
         self.rng.bit_generator.state = state["rng"]
         self.gradient.values = state["values"].numpy().copy()
+        if self.evader is not None:
+            self.evader_optimizer.load_state_dict(state["evader_optimizer"])
+            self.evader_rng.bit_generator.state = state["evader_rng"]
+            values = state["evader_values"]
+            self.evader_gradient.values = None if values is None else values.numpy().copy()
+
+
+def _actor_adam(model: ActorCritic, lr: float) -> torch.optim.Adam:
+    """Adam over a model's actors (the critics are not descended)."""
+    actors = [p for name, p in model.named_parameters() if name.startswith("actor_")]
+    return torch.optim.Adam(actors, lr=lr)

@@ -43,6 +43,7 @@ EXPLOIT_SERIES = (
     ("exploit_worst_case", "evader's best response (pursuers' worst case)", "-"),
     ("exploit_pursuers_br", "pursuers' best response to the learned evader", "--"),
     ("descent_value", "best response the descent trains against (discounted)", ":"),
+    ("evader_descent_value", "pursuers' best response the evader's descent meets", "-."),
 )
 """(update metric, legend text, line style) of the exploitability figure."""
 EXPLOIT_FILE = "exploitability.png"

@@ -135,7 +135,13 @@ class Trainer:
         )
         self.pairing: Pairing = LATEST
         self.descent = (  # grid self-play against the exact best response (a2cm_phys.descent)
-            ExploitabilityDescent(scenario, cfg, self.model, cfg.seed)
+            ExploitabilityDescent(
+                scenario,
+                cfg,
+                self.model,
+                cfg.seed,
+                None if self.evader is None else self.evader.model,
+            )
             if cfg.descent_every
             else None
         )
@@ -298,7 +304,7 @@ class Trainer:
         self.last_metrics = {}
         if pairing.learns("pursuers") and self.descent is None:  # else: by descent, below
             self.last_metrics = self.learner.update(self.batch, progress)
-        if self.evader is not None and pairing.learns("evader"):
+        if self.evader is not None and pairing.learns("evader") and not self._evader_descends():
             evader_metrics = self.evader.learner.update(self.evader.batch, progress)
             self.last_metrics.update({f"evader_{k}": v for k, v in evader_metrics.items()})
         if pool is not None:  # who played: see a2cm_phys.opponents.PAIRING_CODES
@@ -380,9 +386,10 @@ class Trainer:
                 if self.evader is not None
                 else {}
             ),
+            **({"descent_value": self.descent.last_value} if self.descent is not None else {}),
             **(
-                {"descent_value": self.descent.last_value}
-                if self.descent is not None
+                {"evader_descent_value": self.descent.last_evader_value}
+                if self._evader_descends()
                 else {}
             ),
             "captures": s.captures,
@@ -396,16 +403,20 @@ class Trainer:
             "last_checkpoint_update": self.saved_update,
         }
 
+    def _evader_descends(self) -> bool:
+        """Whether the learned evader learns by exploitability descent (not its rollouts)."""
+        return self.descent is not None and self.descent.evader is not None
+
     def _opponents(self) -> str:
         """How the teams of a self-play run met their opponents, for the summary."""
         cfg = self.cfg
         text = "simultaneous" if self.pool is None else self.pool.describe(cfg.pool_every)
         if self.descent is None:
             return text
-        return (
-            f"pursuers: exploitability descent every {cfg.descent_every} updates;"
-            f" evader: {text}"
-        )
+        descent = f"exploitability descent every {cfg.descent_every} updates"
+        if self._evader_descends():
+            return f"both teams: {descent}"
+        return f"pursuers: {descent}; evader: {text}"
 
     def _write_summary(self, status: str) -> None:
         self.last_summary = self.summary(status)
@@ -550,6 +561,11 @@ class _Progress:
                 **({"evader_ret100": f"{s.recent_mean(3, 100):.4g}"} if t.evader else {}),
                 **({"opp": t.pairing.kind} if t.pool is not None else {}),
                 **({"descent": f"{t.descent.last_value:.4g}"} if t.descent is not None else {}),
+                **(
+                    {"evader_descent": f"{t.descent.last_evader_value:.4g}"}
+                    if t._evader_descends()
+                    else {}
+                ),
                 collisions=s.collisions,
                 steps_s=f"{t._session_steps / (now - t._session_start):.0f}",
                 refresh=False,

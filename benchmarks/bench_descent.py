@@ -2,6 +2,7 @@
 
     python benchmarks/bench_descent.py [--seeds 0-4] [--jobs 2] [--logdir logs/bench-descent]
         [--set train.KEY=VALUE ...] [--label NAME]
+    python benchmarks/bench_descent.py --runs RUN_DIR [RUN_DIR ...]
 
 Trains ``grid_vs`` once per seed (``python -m a2cm_phys.train --scenario grid_vs --seed S
 --preset descent`` with the ``--set`` options, no episode log; finished runs are reused,
@@ -14,10 +15,13 @@ run's final policies with the exact solvers, on the scenario's own 1,000-step ho
 - the pursuers' expected capture time against the **random** evader, exactly, beside the
   optimum (2.939);
 - the learned **evader** against the oracle's pursuers, exactly, beside the random and
-  fleeing evaders against the same team.
+  fleeing evaders against the same team, and against its own exact best response (the
+  oracle solved against it: ``oracle --best-response pursuers --evader RUN``), beside the
+  fleeing evader's (3.948) and the random one's (2.939).
 
 A row per run, then medians over seeds with 95% percentile-bootstrap intervals. Wall times
-are those of the training commands, ``--jobs`` at a time.
+are those of the training commands, ``--jobs`` at a time. ``--runs`` measures the given
+``grid_vs`` runs (however trained) the same way and trains nothing.
 """
 
 from __future__ import annotations
@@ -32,10 +36,14 @@ from pathlib import Path
 
 import numpy as np
 
-from a2cm_phys.config import load_scenario
+from a2cm_phys.config import Scenario, load_scenario
 from a2cm_phys.evaluate import load_run
 from a2cm_phys.oracle import load_or_solve
-from a2cm_phys.solve.best_response import evader_best_response, evaluate_tables
+from a2cm_phys.solve.best_response import (
+    evader_best_response,
+    evaluate_tables,
+    pursuers_best_response,
+)
 from a2cm_phys.solve.tables import (
     joint_policy_table,
     model_table,
@@ -65,10 +73,9 @@ def train(seed: int, run_dir: Path, assignments: list[str]) -> float:
     return float(json.loads(summary.read_text())["wall_time_s"])
 
 
-def measure(run_dir: Path, oracle_table: np.ndarray) -> dict[str, float]:
-    """The exact figures of one run's final actors."""
+def measure(run_dir: Path, oracle_table: np.ndarray, game: Scenario) -> dict[str, float]:
+    """The exact figures of one run's final actors in ``game`` (the solvers' rules)."""
     run = load_run(run_dir)
-    game = load_scenario("grid_vs", {"evader": "random"})  # the solvers' rules, any table
     pursuers = model_table(game, run.pursuers, game.pursuers)
     evader = model_table(game, run.evader, 1)
     worst = evader_best_response(game, pursuers)
@@ -78,6 +85,7 @@ def measure(run_dir: Path, oracle_table: np.ndarray) -> dict[str, float]:
         "worst_case_p_capture": worst.p_capture_from_start,
         "vs_random": float(evaluate_tables(game, pursuers, random).values[worst.start]),
         "evader_vs_oracle": float(evaluate_tables(game, oracle_table, evader).values[worst.start]),
+        "evader_vs_best_response": pursuers_best_response(game, evader).value_from_start,
     }
 
 
@@ -94,17 +102,31 @@ def main() -> None:
     p.add_argument("--logdir", default="logs/bench-descent")
     p.add_argument("--set", nargs="+", action="extend", default=[], metavar="KEY=VALUE")
     p.add_argument("--label", default="descent")
+    p.add_argument("--runs", nargs="+", type=Path, metavar="RUN_DIR", help="measure these")
+    p.add_argument("--max-steps", type=int, default=1000, help="the horizon of every exact value")
     args = p.parse_args()
-    seeds = parse_seeds(args.seeds)
     assignments = args.set
-    root = Path(args.logdir) / args.label
-    root.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    with ThreadPoolExecutor(args.jobs) as pool:
-        walls = list(pool.map(lambda s: train(s, root / f"s{s}", assignments), seeds))
-    print(f"trained {len(seeds)} runs in {time.perf_counter() - t0:.0f} s ({args.jobs} at a time)")
+    if args.runs:
+        run_dirs = args.runs
+        names = [str(r) for r in run_dirs]
+        walls = [json.loads((r / "summary.json").read_text())["wall_time_s"] for r in run_dirs]
+        command = "--runs " + " ".join(names)
+    else:
+        seeds = parse_seeds(args.seeds)
+        root = Path(args.logdir) / args.label
+        root.mkdir(parents=True, exist_ok=True)
+        run_dirs, names = [root / f"s{s}" for s in seeds], [str(s) for s in seeds]
+        t0 = time.perf_counter()
+        with ThreadPoolExecutor(args.jobs) as pool:
+            walls = list(pool.map(lambda s: train(s, root / f"s{s}", assignments), seeds))
+        took = time.perf_counter() - t0
+        print(f"trained {len(seeds)} runs in {took:.0f} s ({args.jobs} at a time)")
+        command = f"--seeds {args.seeds}" + "".join(f" --set {a}" for a in assignments)
+    if args.max_steps != 1000:
+        command += f" --max-steps {args.max_steps}"
 
-    game = load_scenario("grid_vs", {"evader": "random"})
+    # the solvers take any evader's table: the scenario's own evader only names the rules
+    game = load_scenario("grid_vs", {"evader": "random", "max_steps": args.max_steps})
     oracle = joint_policy_table(game, load_or_solve(load_scenario("grid")).policy)
     start = evader_best_response(game, oracle)
     reference = {
@@ -115,20 +137,31 @@ def main() -> None:
         "fleeing evader vs oracle": float(
             evaluate_tables(game, oracle, scripted_evader_table(game, "flee")).values[start.start]
         ),
+        "fleeing evader vs its best response": pursuers_best_response(
+            game, scripted_evader_table(game, "flee")
+        ).value_from_start,
     }
-    rows = [measure(root / f"s{s}", oracle) for s in seeds]
-    print(f"command: python benchmarks/bench_descent.py --seeds {args.seeds}"
-          + "".join(f" --set {a}" for a in assignments))  # fmt: skip
+    rows = [measure(r, oracle, game) for r in run_dirs]
+    print(f"command: python benchmarks/bench_descent.py {command}")
     print("references: " + ", ".join(f"{k} {v:.3f}" for k, v in reference.items()))
-    print("\n| seed | worst case (exact) | P(capture) within 1,000 | vs random evader (exact) |"
-          " learned evader vs oracle (exact) | wall (s) |")  # fmt: skip
-    print("|---|---|---|---|---|---|")
-    for seed, row, wall in zip(seeds, rows, walls, strict=True):
+    print(f"\n| run | worst case (exact) | P(capture) within {args.max_steps:,} |"
+          " vs random evader (exact) |"
+          " learned evader vs oracle (exact) | learned evader vs its best response (exact) |"
+          " wall (s) |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|")
+    for name, row, wall in zip(names, rows, walls, strict=True):
         print(
-            f"| {seed} | {row['worst_case']:.3f} | {row['worst_case_p_capture']:.6f} |"
-            f" {row['vs_random']:.3f} | {row['evader_vs_oracle']:.3f} | {wall:.0f} |"
+            f"| {name} | {row['worst_case']:.3f} | {row['worst_case_p_capture']:.6f} |"
+            f" {row['vs_random']:.3f} | {row['evader_vs_oracle']:.3f} |"
+            f" {row['evader_vs_best_response']:.3f} | {wall:.0f} |"
         )
-    cols = ("worst_case", "worst_case_p_capture", "vs_random", "evader_vs_oracle")
+    cols = (
+        "worst_case",
+        "worst_case_p_capture",
+        "vs_random",
+        "evader_vs_oracle",
+        "evader_vs_best_response",
+    )
     print(
         "| median [95% CI] | "
         + " | ".join(median_ci([r[c] for r in rows]) for c in cols)

@@ -12,8 +12,8 @@ import torch
 from a2cm_phys.config import ConfigError, load_scenario, load_train
 from a2cm_phys.descent import ExploitabilityDescent, check_descent
 from a2cm_phys.envs.grid import GridRules
-from a2cm_phys.solve.best_response import evader_best_response
-from a2cm_phys.solve.descent import WorstCaseGradient
+from a2cm_phys.solve.best_response import evader_best_response, pursuers_best_response
+from a2cm_phys.solve.descent import EvaderGradient, WorstCaseGradient
 from a2cm_phys.solve.tables import model_table, n_states, start_state, state_cells
 from a2cm_phys.teams import make_teams
 
@@ -241,6 +241,165 @@ def test_in_self_play_the_pursuers_learn_by_descent_alone(tmp_path) -> None:
     summary = trainer.summary()
     assert "exploitability descent every 2 updates" in summary["opponents"]
     assert summary["descent_value"] == trainer.last_metrics["descent_value"] > 0
+
+
+def random_evader(scenario, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return rng.dirichlet(np.ones(scenario.actions), size=(n_states(scenario), 1))
+
+
+def evader_gradient(scenario, gamma: float, sweeps: int) -> EvaderGradient:
+    worst = WorstCaseGradient(scenario, gamma, trajectories=40_000, horizon=200)
+    worst.refresh(random_table(scenario, 9))  # the next-state structures, any team
+    return EvaderGradient(scenario, gamma, worst, sweeps=sweeps, first_sweeps=sweeps)
+
+
+def evader_brute_force(scenario, evader, gamma, sweeps, best=None):
+    """The pursuers' best-response costs, and against ``best`` (default: the brute force's
+    own minimiser) the evader's advantages and the discounted visits, by enumeration."""
+    nxt, goes_on = enumerate_rules(scenario)
+    valid = ~np.any(state_cells(scenario)[:-1] == state_cells(scenario)[-1], axis=0)
+    sigma, rows = evader[:, 0], np.arange(len(evader))
+    v = np.zeros(len(evader))
+    for _ in range(sweeps):
+        q = np.einsum("sb,sjb->sj", sigma, 1 + gamma * goes_on * v[nxt])
+        v = np.where(valid, q.min(1), 0.0)
+    best = q.argmin(1) if best is None else best
+    q_b = 1 + gamma * goes_on[rows, best] * v[nxt[rows, best]]  # (S, nb)
+    adv = q_b - (q_b * sigma).sum(-1, keepdims=True)
+    visits, d = np.zeros(len(evader)), np.zeros(len(evader))
+    d[start_state(scenario)] = 1.0
+    for _ in range(400):
+        visits += d
+        flow = d[:, None] * sigma * goes_on[rows, best]
+        d = gamma * np.bincount(nxt[rows, best].ravel(), flow.ravel(), len(evader))
+    return v, q, adv, visits
+
+
+def test_undiscounted_evader_values_are_the_pursuers_best_response() -> None:
+    scenario = small()
+    table = random_evader(scenario, 0)
+    gradient = evader_gradient(scenario, 1.0, sweeps=300)
+    value = gradient.refresh(table)
+    br = pursuers_best_response(scenario, table)
+    valid = ~np.any(state_cells(scenario)[:-1] == state_cells(scenario)[-1], axis=0)
+    np.testing.assert_allclose(gradient.values[valid], br.values[valid], rtol=0, atol=1e-8)
+    assert value == pytest.approx(br.value_from_start, abs=1e-8)
+
+
+def test_evader_advantages_and_visits_match_enumeration() -> None:
+    scenario, gamma = small(), 0.9
+    table = random_evader(scenario, 1)
+    gradient = evader_gradient(scenario, gamma, sweeps=200)
+    gradient.refresh(table)
+    v, q, adv, visits = evader_brute_force(scenario, table, gamma, 200, best=None)
+    valid = ~np.any(state_cells(scenario)[:-1] == state_cells(scenario)[-1], axis=0)
+    np.testing.assert_allclose(gradient.values[valid], v[valid], atol=1e-10)
+    rows = np.arange(len(table))
+    # its joint action is a minimiser (ties may go either way), and against it:
+    assert np.all(q[rows, gradient.best] <= q.min(1) + 1e-10)
+    _, _, adv, visits = evader_brute_force(scenario, table, gamma, 200, best=gradient.best)
+    np.testing.assert_allclose(gradient.advantages(rows), adv, atol=1e-10)
+    got_rows, counts = gradient.visits(np.random.default_rng(0))
+    sampled = np.zeros(len(table))
+    sampled[got_rows] = counts
+    assert np.abs(sampled - visits).sum() < 0.02 * visits.sum()
+
+
+def test_the_evader_gradient_is_the_derivative_of_its_worst_case() -> None:
+    """Σ_s d(s) Σ_b δ(b|s) A(s, b) against a finite difference of V(s₀) along δ."""
+    scenario, gamma = small(), 0.9
+    table = random_evader(scenario, 2)
+    gradient = evader_gradient(scenario, gamma, sweeps=300)
+    value = gradient.refresh(table)
+    _, _, adv, visits = evader_brute_force(scenario, table, gamma, 300, best=gradient.best)
+    rng = np.random.default_rng(3)
+    delta = rng.normal(size=table.shape)
+    delta -= delta.mean(-1, keepdims=True)
+    predicted = (visits[:, None] * delta[:, 0] * adv).sum()
+    eps = 1e-6
+    moved = evader_gradient(scenario, gamma, sweeps=300).refresh(table + eps * delta)
+    assert predicted == pytest.approx((moved - value) / eps, rel=1e-4)
+    assert predicted != pytest.approx(0.0, abs=1e-3)  # a real direction
+
+
+def test_evader_descent_raises_its_worst_case() -> None:
+    """Ten steps of a fresh evader against the pursuers' exact best response make that best
+    response's capture time (exact, horizon 300) grow."""
+    scenario = small()
+    cfg = load_train({"layers": 2, "hidden": 64, "encoding": "onehot", "descent_lr": 3e-3,
+                      "descent_steps": 5, "descent_every": 1, "descent_teams": "both"})  # fmt: skip
+    pursuers, evader = make_teams(scenario, cfg)
+    descent = ExploitabilityDescent(scenario, cfg, pursuers.model, 0, evader.model)
+
+    def worst_case() -> float:
+        table = model_table(scenario, evader.model, 1)
+        return pursuers_best_response(scenario, table).value_from_start
+
+    before = worst_case()
+    for _ in range(10):
+        metrics = descent.step()
+    after = worst_case()
+    assert metrics["evader_descent_states"] > 0 and metrics["evader_descent_value"] > 0
+    assert after > before + 0.1, (before, after)
+
+
+def test_both_teams_descent_state_round_trips() -> None:
+    scenario = small()
+    cfg = load_train({"descent_every": 1, "descent_teams": "both"})
+    _, evader = make_teams(scenario, cfg)
+    a = ExploitabilityDescent(scenario, cfg, make_teams(scenario, cfg)[0].model, 0, evader.model)
+    a.step()
+    _, other = make_teams(scenario, cfg)
+    b = ExploitabilityDescent(scenario, cfg, make_teams(scenario, cfg)[0].model, 9, other.model)
+    b.load_state_dict(a.state_dict())
+    np.testing.assert_array_equal(a.evader_gradient.values, b.evader_gradient.values)
+    assert a.evader_rng.random() == b.evader_rng.random()
+    assert torch.equal(
+        a.evader_optimizer.state_dict()["state"][0]["exp_avg"],
+        b.evader_optimizer.state_dict()["state"][0]["exp_avg"],
+    )
+
+
+@pytest.mark.parametrize(
+    ("overrides", "options", "match"),
+    [
+        ({}, {"descent_teams": "both"}, "key 'descent_teams'.*descent_every"),
+        ({"collisions": {"mode": "terminate"}}, {"descent_every": 2, "descent_teams": "both"},
+         "key 'descent_teams'.*terminate"),
+    ],
+)  # fmt: skip
+def test_evader_descent_needs_descent_and_no_ending_collisions(
+    overrides: dict, options: dict, match: str
+) -> None:
+    with pytest.raises(ConfigError, match=match):
+        check_descent(load_scenario("grid_vs", {**SMALL, **overrides}), load_train(options))
+
+
+def test_with_both_teams_the_evader_learns_by_descent_alone(tmp_path) -> None:
+    """With ``descent_teams = "both"`` the evader's actor moves at the descent updates only
+    (its rollout learner is not stepped), and the summary says both teams descend."""
+    from a2cm_phys.trainer import Trainer
+
+    scenario = load_scenario("grid_vs", {**SMALL, "max_steps": 50})
+    cfg = load_train({"num_envs": 4, "batch_size": 32, "updates": 4, "descent_every": 2,
+                      "descent_teams": "both"})  # fmt: skip
+    trainer = Trainer(scenario, cfg, tmp_path, record=False)
+    moved = []
+    update = trainer._one_update
+
+    def spy(on_step: object) -> None:
+        before = [p.detach().clone() for p in trainer.evader.model.parameters()]
+        update(on_step)
+        after = list(trainer.evader.model.parameters())
+        moved.append(not all(torch.equal(a, b) for a, b in zip(before, after, strict=True)))
+
+    trainer._one_update = spy  # type: ignore[method-assign]
+    assert trainer.run() == "done"
+    assert moved == [False, True, False, True]
+    summary = trainer.summary()
+    assert summary["opponents"].startswith("both teams: exploitability descent")
+    assert summary["evader_descent_value"] == trainer.last_metrics["evader_descent_value"] > 0
 
 
 def test_the_descent_preset_is_grid_self_play_with_deeper_one_hot_actors() -> None:

@@ -1,4 +1,4 @@
-"""The exact gradient of a pursuer team's worst case on the grid (exploitability descent).
+"""The exact gradients of both teams' worst cases on the grid (exploitability descent).
 
 Against a pursuer table ``π`` (:mod:`.tables`) the evader's best response has the values
 
@@ -28,14 +28,22 @@ against the opponent that exploits it most. :class:`WorstCaseGradient` computes 
 
 The step operator is :class:`~.pursuer_step.PursuerStep`'s general kind, reweighted for
 each new table (:meth:`~.pursuer_step.PursuerStep.reweight`).
+
+:class:`EvaderGradient` is the same for the other team: the pursuers' best response to an
+evader table (the oracle's backup, :mod:`.dp`) and the gradient of its value in the
+evader's policy, which the evader ascends.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
-from ..config import Scenario
+from ..config import Rewards, Scenario
 from ..envs.grid import GridRules
+from .dp import bellman_backup
+from .model import GridModel
 from .pursuer_step import PursuerStep, check_size
 from .tables import n_states, start_state, state_cells
 
@@ -49,6 +57,10 @@ SAMPLES = 8_192
 """States drawn from the visits, in proportion to them, for the gradient: an unbiased
 estimate at a fraction of the cost of every visited state (up to 200,000 of a team that
 rarely captures)."""
+
+EVADER_SWEEPS = 3
+"""Sweeps of the oracle's backup per call of :class:`EvaderGradient` (about 0.5 s each on
+the 5×5 arena; the last, which reads the best response off, among them)."""
 
 HORIZON = 60
 """Steps each simulated game runs at most (``γ^60 ≈ 0.55`` at γ 0.99: later visits count
@@ -121,7 +133,7 @@ class WorstCaseGradient:
             draw = rng.random(cdf.shape[:2]) * cdf[..., -1]
             moves = (cdf <= draw[..., None]).sum(axis=-1).clip(max=step.a - 1)  # (M, N)
             joint = moves @ step.a ** np.arange(step.n - 1, -1, -1)
-            nxt, goes_on = self._next(state, joint)
+            nxt, goes_on = self.transition(state, joint, self.choice[state])
             state = nxt[goes_on]
             if not len(state):
                 break
@@ -148,7 +160,8 @@ class WorstCaseGradient:
         step = self._require()
         n, a = step.n, step.a
         joint = np.arange(a**n)
-        nxt, goes_on = self._next(np.repeat(rows, len(joint)), np.tile(joint, len(rows)))
+        states = np.repeat(rows, len(joint))
+        nxt, goes_on = self.transition(states, np.tile(joint, len(rows)), self.choice[states])
         value = 1.0 + self.gamma * goes_on * self.values[nxt]
         value = value.reshape((len(rows),) + (a,) * n)
         probs = step.table[rows]  # (R, N, A)
@@ -160,13 +173,15 @@ class WorstCaseGradient:
             q[:, i] = np.einsum(f"{spec}->r{letters[i]}", value, *(probs[:, k] for k in others))
         return q - (q * probs).sum(axis=-1, keepdims=True)
 
-    def _next(self, states: np.ndarray, joint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Next states of ``states`` under joint actions ``joint`` and the evader's best
-        moves, and whether the episode goes on (no capture, no ending collision)."""
+    def transition(
+        self, states: np.ndarray, joint: np.ndarray, move: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Next states of ``states`` under the pursuers' joint actions ``joint`` and the
+        evader's moves ``move``, and whether the episode goes on (no capture, no ending
+        collision)."""
         step = self._require()
         assert self._swapped is not None
         flat = states * step.index.shape[1] + joint
-        move = self.choice[states]
         nxt = step.index.ravel()[flat] + self._shift[states, move]
         goes_on = step.valid[nxt] & ~self._swapped[move, flat]
         if step.terminate:
@@ -177,3 +192,91 @@ class WorstCaseGradient:
         if self._step is None:
             raise RuntimeError("call refresh(table) first")
         return self._step
+
+
+class EvaderGradient:
+    """The pursuers' best response to an evader table and the evader's gradient against it.
+
+    The mirror of :class:`WorstCaseGradient`. Against an evader table ``σ`` the pursuers'
+    best response (the oracle against ``σ``, on a game whose every step costs 1) has the
+    costs
+
+        V(s) = min_a Σ_b σ(b | s) · (1 + γ · [the episode goes on] · V(s'))
+
+    and, the minimising joint actions held fixed, the gradient of ``V(s₀)`` in the evader's
+    policy is ``Σ_s d(s) Σ_b ∇σ(b | s) · Q(s, b)``, ``d`` the discounted visits when the
+    pursuers play their best response and the evader ``σ``, ``Q(s, b)`` the value of the
+    step when the evader moves ``b``. The evader *ascends* it: its worst case is how soon
+    the team that knows its policy catches it.
+
+    ``V`` comes from the oracle's backup (:func:`~.dp.bellman_backup`), ``sweeps`` a call
+    warm-started from the last (``first_sweeps`` on the first). The next states, the visits'
+    simulation and the sampling are ``worst``'s (:class:`WorstCaseGradient`, refreshed
+    first), which the pursuers' own descent keeps up to date.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        gamma: float,
+        worst: WorstCaseGradient,
+        sweeps: int = EVADER_SWEEPS,
+        first_sweeps: int = 20,
+    ) -> None:
+        # the best response minimises the episode's length: a step costs 1, nothing else
+        self.game = dataclasses.replace(scenario, rewards=Rewards(step=-1.0))
+        self.gamma, self.worst = gamma, worst
+        self.sweeps, self.first_sweeps = sweeps, first_sweeps
+        self.values: np.ndarray | None = None  # V over every joint state (steps)
+        self.best = np.zeros(n_states(scenario), dtype=np.int64)  # the joint action
+        self.table: np.ndarray | None = None  # σ, (S, nb)
+
+    def refresh(self, evader_probs: np.ndarray) -> float:
+        """Take the evader's table ``(S, 1, A)``, update the pursuers' best response by
+        :attr:`sweeps` sweeps, and return ``V`` at the start."""
+        model = GridModel(self.game, evader_probs=evader_probs)
+        first = self.values is None
+        v = np.zeros(model.shape) if first else -self.values.reshape(model.shape)
+        for _ in range((self.first_sweeps if first else self.sweeps) - 1):
+            v = bellman_backup(model, self.gamma * v, None, None)
+        policy = np.zeros(model.shape, dtype=np.int64)
+        v = bellman_backup(model, self.gamma * v, None, None, policy)
+        self.values, self.best = -v.ravel(), policy.ravel()
+        self.table = evader_probs[:, 0]
+        return float(self.values[self.worst.start])
+
+    def visits(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """The visited states and their discounted visits per game ``(rows, weights)``,
+        from the worst case's number of simulated games, the pursuers playing their best
+        response and the evader sampled from its table."""
+        table, w = self._require(), self.worst
+        state = np.full(w.trajectories, w.start)
+        counts = np.zeros(len(table))
+        for t in range(w.horizon):
+            counts += np.bincount(state, minlength=len(table)) * self.gamma**t
+            cdf = np.cumsum(table[state], axis=-1)
+            draw = rng.random(len(state))[:, None] * cdf[:, -1:]
+            move = (cdf <= draw).sum(axis=-1).clip(max=table.shape[1] - 1)
+            nxt, goes_on = w.transition(state, self.best[state], move)
+            state = nxt[goes_on]
+            if not len(state):
+                break
+        rows = np.flatnonzero(counts)
+        return rows, counts[rows] / w.trajectories
+
+    def advantages(self, rows: np.ndarray) -> np.ndarray:
+        """``(R, nb)``: in each state of ``rows``, ``Q(s, b) − Σ_b σ(b | s) Q(s, b)`` for
+        every evader move ``b``, against the pursuers' best response."""
+        table = self._require()
+        nb = table.shape[1]
+        states = np.repeat(rows, nb)
+        move = np.tile(np.arange(nb), len(rows))
+        nxt, goes_on = self.worst.transition(states, self.best[states], move)
+        assert self.values is not None
+        q = (1.0 + self.gamma * goes_on * self.values[nxt]).reshape(len(rows), nb)
+        return q - (q * table[rows]).sum(axis=-1, keepdims=True)
+
+    def _require(self) -> np.ndarray:
+        if self.table is None:
+            raise RuntimeError("call refresh(evader_probs) first")
+        return self.table

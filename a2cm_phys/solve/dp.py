@@ -44,14 +44,17 @@ class DPResult:
     seconds: float
 
 
-def _greedy(
+def bellman_backup(
     model: GridModel,
     v: np.ndarray,
     lose: np.ndarray | None,
     safe: list[np.ndarray] | None,
     policy: np.ndarray | None = None,
 ) -> np.ndarray:
-    """One Bellman backup ``max_a Q(s, a)``; fills ``policy`` with the argmax if given."""
+    """One Bellman backup ``max_a Q(s, a)`` of the values ``v`` (shape ``model.shape``);
+    fills ``policy`` with the argmax if given. ``lose`` and ``safe`` are those of
+    :func:`winning_states` (``None``: every state can force termination). The backup is
+    linear in ``v`` before the max, so ``γ · v`` gives the discounted one."""
     u = v if lose is None else np.where(lose, 0.0, v)
     out = np.empty(model.shape)
     n = model.n
@@ -121,12 +124,12 @@ def solve_dp(model: GridModel, tol: float | None = None, max_sweeps: int = 100_0
     while residual >= tol:
         if sweeps == max_sweeps:
             raise RuntimeError(f"value iteration did not converge in {max_sweeps} sweeps")
-        new = _greedy(model, v, lose, safe)
+        new = bellman_backup(model, v, lose, safe)
         residual = float(np.max(np.abs(new[finite] - v[finite]), initial=0.0))
         v, sweeps = new, sweeps + 1
     dtype = np.min_scalar_type(model.n_joint - 1)
     policy = np.zeros(model.shape, dtype=dtype)
-    v = _greedy(model, v, lose, safe, policy)
+    v = bellman_backup(model, v, lose, safe, policy)
     return DPResult(
         value=v.ravel(),
         policy=policy.ravel(),
