@@ -354,11 +354,12 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 """Named sets of :class:`Train` values (``--preset NAME``). ``paper`` is the paper's exact
 method (SPEC §6): RMSprop 7e-3 (Keras rho 0.9, eps 1e-7), one game, plain eq. 13 returns,
-raw rewards. ``descent`` is grid self-play whose pursuers learn by exploitability descent
-(:mod:`a2cm_phys.descent`; 250 exact best responses, two actor steps each, on actors of
-two hidden layers of 128 over one-hot cells; about 10-20 minutes on ``grid_vs``), which
-gives pursuers that no evader escapes for long (``BENCHMARKS.md``). Explicit options given
-beside a preset win over it."""
+raw rewards. ``descent`` is grid self-play whose teams both learn by exploitability
+descent (:mod:`a2cm_phys.descent`; 250 exact best responses to each, two actor steps each,
+on actors of two hidden layers of 128 over one-hot cells; about 25 minutes on
+``grid_vs``): pursuers that no evader escapes for long, and an evader that the team which
+knows it catches no sooner than it catches the fleeing one (``BENCHMARKS.md``). Explicit
+options given beside a preset win over it."""
 
 
 def preset(name: str) -> dict[str, Any]:

@@ -136,18 +136,18 @@ class ExploitabilityDescent:
         rows, visits = self.gradient.visits(self.rng)
         rows, visits = self.gradient.sample(self.rng, rows, visits)
         advantages = self.gradient.advantages(rows)
-        self._ascend(self.model, self.optimizer, rows, visits, advantages, sign=1.0)
+        self._actor_steps(self.model, self.optimizer, rows, visits, advantages, sign=1.0)
         metrics = {"descent_value": value, "descent_states": float(len(rows))}
         if self.evader is not None:
             e = self.evader_gradient
             value = self.last_evader_value = e.refresh(model_table(self.scenario, self.evader, 1))
             rows, visits = self.gradient.sample(self.evader_rng, *e.visits(self.evader_rng))
             advantages = e.advantages(rows)[:, None, :]  # one agent
-            self._ascend(self.evader, self.evader_optimizer, rows, visits, advantages, -1.0)
+            self._actor_steps(self.evader, self.evader_optimizer, rows, visits, advantages, -1.0)
             metrics.update(evader_descent_value=value, evader_descent_states=float(len(rows)))
         return metrics
 
-    def _ascend(
+    def _actor_steps(
         self,
         model: ActorCritic,
         optimizer: torch.optim.Optimizer,

@@ -54,6 +54,8 @@ CASES = [
     ("train", ["--set", "train.exploit_every=-1"], "exploit_every"),
     ("train", ["--scenario", "phys_vs", "--preset", "descent"], "'descent_every'"),
     ("train", ["--set", "train.descent_lr=0"], "descent_lr"),
+    ("train", ["--scenario", "grid_vs", "--set", "train.descent_teams=both"], "'descent_teams'"),
+    ("train", ["--set", "train.descent_teams=evader"], "descent_teams"),
     ("train", ["--set", "train.layers=0"], "layers"),
     ("train", ["--set", "train.encoding=bits"], "encoding"),
     ("train", ["--scenario", "phys", "--set", "train.encoding=onehot"], "'encoding'"),

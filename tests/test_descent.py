@@ -407,6 +407,7 @@ def test_the_descent_preset_is_grid_self_play_with_deeper_one_hot_actors() -> No
 
     cfg = load_train(preset("descent"))
     assert cfg.descent_every > 0 and cfg.layers == 2 and cfg.encoding == "onehot"
+    assert cfg.descent_teams == "both"
     check_descent(load_scenario("grid_vs"), cfg)  # fine there
     with pytest.raises(ConfigError, match="key 'descent_every'"):
         check_descent(load_scenario("grid"), cfg)

@@ -70,7 +70,8 @@ def test_one_run_trains_both_teams(tmp_path: Path) -> None:
     [
         (),
         ("--set", "train.pool_every=2", "train.pool_size=2"),
-        ("--set", "train.descent_every=3", "size=3", "pursuers=2", "max_steps=50"),
+        ("--set", "train.descent_every=3", "train.descent_teams=both", "size=3", "pursuers=2",
+         "max_steps=50"),
     ],
     ids=["simultaneous", "pool", "descent"],
 )
@@ -90,6 +91,8 @@ def test_self_play_resumes_bit_for_bit(tmp_path: Path, opponents: tuple[str, ...
     if "train.descent_every=3" in opponents:  # the same best response and Adam state
         da, db = a["descent"], b["descent"]
         assert torch.equal(da["values"], db["values"]) and da["rng"] == db["rng"]
+        assert torch.equal(da["evader_values"], db["evader_values"])
+        assert da["evader_rng"] == db["evader_rng"]
         assert torch.equal(
             da["optimizer"]["state"][0]["exp_avg"], db["optimizer"]["state"][0]["exp_avg"]
         )
