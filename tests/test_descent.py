@@ -172,20 +172,29 @@ def test_descent_steps_lower_the_worst_case() -> None:
     assert after < 0.5 * before, (before, after)
 
 
-def test_descent_state_round_trips() -> None:
+@pytest.mark.parametrize("teams", ["pursuers", "both"])
+def test_descent_state_round_trips(teams: str) -> None:
     scenario = small()
-    cfg = load_train({"descent_every": 1})
-    pursuers, _ = make_teams(scenario, cfg)
-    a = ExploitabilityDescent(scenario, cfg, pursuers.model, seed=0)
+    cfg = load_train({"descent_every": 1, "descent_teams": teams})
+
+    def descent(seed: int) -> ExploitabilityDescent:
+        pursuers, evader = make_teams(scenario, cfg)
+        return ExploitabilityDescent(scenario, cfg, pursuers.model, seed, evader.model)
+
+    a = descent(0)
     a.step()
-    b = ExploitabilityDescent(scenario, cfg, make_teams(scenario, cfg)[0].model, seed=9)
+    b = descent(9)
     b.load_state_dict(a.state_dict())
-    np.testing.assert_array_equal(a.gradient.values, b.gradient.values)
-    assert a.rng.random() == b.rng.random()
-    assert torch.equal(
-        a.optimizer.state_dict()["state"][0]["exp_avg"],
-        b.optimizer.state_dict()["state"][0]["exp_avg"],
-    )
+    sides = [(a.gradient, a.rng, a.optimizer, b.gradient, b.rng, b.optimizer)]
+    if teams == "both":
+        sides.append((a.evader_gradient, a.evader_rng, a.evader_optimizer,
+                      b.evader_gradient, b.evader_rng, b.evader_optimizer))  # fmt: skip
+    for grad_a, rng_a, opt_a, grad_b, rng_b, opt_b in sides:
+        np.testing.assert_array_equal(grad_a.values, grad_b.values)
+        assert rng_a.random() == rng_b.random()
+        assert torch.equal(
+            opt_a.state_dict()["state"][0]["exp_avg"], opt_b.state_dict()["state"][0]["exp_avg"]
+        )
 
 
 @pytest.mark.parametrize(
@@ -342,23 +351,6 @@ def test_evader_descent_raises_its_worst_case() -> None:
     after = worst_case()
     assert metrics["evader_descent_states"] > 0 and metrics["evader_descent_value"] > 0
     assert after > before + 0.1, (before, after)
-
-
-def test_both_teams_descent_state_round_trips() -> None:
-    scenario = small()
-    cfg = load_train({"descent_every": 1, "descent_teams": "both"})
-    _, evader = make_teams(scenario, cfg)
-    a = ExploitabilityDescent(scenario, cfg, make_teams(scenario, cfg)[0].model, 0, evader.model)
-    a.step()
-    _, other = make_teams(scenario, cfg)
-    b = ExploitabilityDescent(scenario, cfg, make_teams(scenario, cfg)[0].model, 9, other.model)
-    b.load_state_dict(a.state_dict())
-    np.testing.assert_array_equal(a.evader_gradient.values, b.evader_gradient.values)
-    assert a.evader_rng.random() == b.evader_rng.random()
-    assert torch.equal(
-        a.evader_optimizer.state_dict()["state"][0]["exp_avg"],
-        b.evader_optimizer.state_dict()["state"][0]["exp_avg"],
-    )
 
 
 @pytest.mark.parametrize(

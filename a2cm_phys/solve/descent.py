@@ -37,6 +37,7 @@ evader's policy, which the evader ascends.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 
@@ -65,6 +66,14 @@ the 5×5 arena; the last, which reads the best response off, among them)."""
 HORIZON = 60
 """Steps each simulated game runs at most (``γ^60 ≈ 0.55`` at γ 0.99: later visits count
 little, and a team worth training captures long before)."""
+
+
+def draw(rng: np.random.Generator, probs: np.ndarray) -> np.ndarray:
+    """One action per row of ``probs`` ``(M, K, A)``: ``(M, K)`` indices, drawn by inverse
+    CDF from ``M · K`` uniforms."""
+    cdf = np.cumsum(probs, axis=-1)
+    u = rng.random(cdf.shape[:2]) * cdf[..., -1]
+    return (cdf <= u[..., None]).sum(axis=-1).clip(max=probs.shape[-1] - 1)
 
 
 class WorstCaseGradient:
@@ -124,16 +133,26 @@ class WorstCaseGradient:
         from :attr:`trajectories` games from the start, pursuers sampled from the table and
         the evader playing its best move."""
         step = self._require()
+        places = step.a ** np.arange(step.n - 1, -1, -1)
+
+        def moves(state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            joint = draw(rng, step.table[state]) @ places  # each pursuer from its own row
+            return joint, self.choice[state]
+
+        return self.simulate(moves)
+
+    def simulate(
+        self, moves: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The visited states and their discounted visits per game ``(rows, weights)`` of
+        :attr:`trajectories` games from the start, :attr:`horizon` steps at most, ``moves``
+        giving the joint actions and the evader's moves in the states it is given."""
+        step = self._require()
         state = np.full(self.trajectories, self.start)
         counts = np.zeros(step.n_states)
         for t in range(self.horizon):
             counts += np.bincount(state, minlength=step.n_states) * self.gamma**t
-            # each pursuer's move drawn from its own row: the joint action's index
-            cdf = np.cumsum(step.table[state], axis=-1)  # (M, N, A)
-            draw = rng.random(cdf.shape[:2]) * cdf[..., -1]
-            moves = (cdf <= draw[..., None]).sum(axis=-1).clip(max=step.a - 1)  # (M, N)
-            joint = moves @ step.a ** np.arange(step.n - 1, -1, -1)
-            nxt, goes_on = self.transition(state, joint, self.choice[state])
+            nxt, goes_on = self.transition(state, *moves(state))
             state = nxt[goes_on]
             if not len(state):
                 break
@@ -249,20 +268,10 @@ class EvaderGradient:
         """The visited states and their discounted visits per game ``(rows, weights)``,
         from the worst case's number of simulated games, the pursuers playing their best
         response and the evader sampled from its table."""
-        table, w = self._require(), self.worst
-        state = np.full(w.trajectories, w.start)
-        counts = np.zeros(len(table))
-        for t in range(w.horizon):
-            counts += np.bincount(state, minlength=len(table)) * self.gamma**t
-            cdf = np.cumsum(table[state], axis=-1)
-            draw = rng.random(len(state))[:, None] * cdf[:, -1:]
-            move = (cdf <= draw).sum(axis=-1).clip(max=table.shape[1] - 1)
-            nxt, goes_on = w.transition(state, self.best[state], move)
-            state = nxt[goes_on]
-            if not len(state):
-                break
-        rows = np.flatnonzero(counts)
-        return rows, counts[rows] / w.trajectories
+        table = self._require()
+        return self.worst.simulate(
+            lambda state: (self.best[state], draw(rng, table[state, None])[:, 0])
+        )
 
     def advantages(self, rows: np.ndarray) -> np.ndarray:
         """``(R, nb)``: in each state of ``rows``, ``Q(s, b) − Σ_b σ(b | s) Q(s, b)`` for
