@@ -1,12 +1,13 @@
 """Play pursuers against an evader and report: ``python -m a2cm_phys.evaluate RUN --greedy``.
 
 The pursuers and the evader are chosen apart, each a run directory or a named policy
-(``--pursuers random|pursuit|oracle|minimax|RUN``, ``--evader random|flee|static|RUN``; see
-:mod:`a2cm_phys.policies`). The report gives the mean, median and 95th percentile of the
-capture steps, the capture rate, the collisions per episode and the return under the
-scenario's raw reward, each with a seeded bootstrap 95% confidence interval, and beside
-them a reference: on grids the oracle solves, the exact optimum and the gap to it; in
-physics mode a reference policy played on the same episodes (``--reference``).
+(``--pursuers random|pursuit|oracle|minimax|RUN``, ``--evader
+random|flee|static|best-response|equilibrium|RUN``; see :mod:`a2cm_phys.policies`). The
+report gives the mean, median and 95th percentile of the capture steps, the capture rate,
+the collisions per episode and the return under the scenario's raw reward, each with a
+seeded bootstrap 95% confidence interval, and beside them a reference: on grids the oracle
+solves, the exact optimum and the gap to it; in physics mode a reference policy played on
+the same episodes (``--reference``).
 ``--cross-play`` plays every pairing of comma-separated lists of pursuers and evaders.
 
 Episodes are played in several games at once without favouring short ones: each game plays
@@ -31,9 +32,9 @@ from .cli import SEED, Parser, add_scenario_options, int_range, run_cli, scenari
 from .config import ConfigError, Scenario, build, load_train, stored_train
 from .envs.vector import VectorEnv
 from .policies import (
-    BEST_RESPONSE,
     EVADER_POLICIES,
     PURSUER_POLICIES,
+    SOLVED_EVADERS,
     Matchup,
     matchup,
     pursuer_policy,
@@ -282,8 +283,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--evader",
-        help=f"a run directory with a learned evader, {'|'.join(EVADER_POLICIES)} or"
-        " best-response (exact, grids)"
+        help=f"a run directory with a learned evader, {'|'.join(EVADER_POLICIES)},"
+        " best-response (exact, grids) or equilibrium (the game's, grids; minutes)"
         " (default: the scenario's); with --cross-play a comma-separated list",
     )
     p.add_argument(
@@ -326,7 +327,7 @@ def _scenario(args: argparse.Namespace, specs: Sequence[str | None]) -> Scenario
     if args.scenario:
         return scenario_from_args(args, train=False)
     for spec in specs:  # the first run among the policies names the game
-        if spec and spec not in (*PURSUER_POLICIES, *EVADER_POLICIES, BEST_RESPONSE):
+        if spec and spec not in (*PURSUER_POLICIES, *EVADER_POLICIES, *SOLVED_EVADERS):
             return load_run(spec).scenario
     raise ConfigError("named policies need --scenario (or a run directory)")
 

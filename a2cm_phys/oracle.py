@@ -12,6 +12,10 @@ define the game (:func:`cache_key`); the cache directory defaults to
 ``$XDG_CACHE_HOME/a2cm_phys/oracle`` (``~/.cache/a2cm_phys/oracle``).
 :class:`OraclePolicy` plays the optimal policy from observations, so evaluations and replays
 can put learned policies next to it.
+
+``--best-response evader|pursuers`` solves one team's exact best response to the other's
+fixed policy (:mod:`a2cm_phys.solve.best_response`); ``--game-value`` brackets the game's
+value when both teams play their best (:mod:`a2cm_phys.solve.nash`).
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -63,6 +68,7 @@ from .solve.evaluate import CaptureDistribution, PolicyChain
 from .solve.minimax import MinimaxBounds
 from .solve.pursuer_step import check_size
 from .solve.sources import (
+    EVADER_NAMES,
     PURSUER_NAMES,
     SourceError,
     evader_source,
@@ -71,6 +77,9 @@ from .solve.sources import (
     run_scenario,
 )
 from .solve.tables import SCRIPTED_EVADERS, uniform_table
+
+if TYPE_CHECKING:  # the solver imports torch: only when --game-value asks for it
+    from .solve.nash import GameValue
 
 SOLVER_VERSION = 1
 """Bumped whenever a change of the solver invalidates cached solutions."""
@@ -415,9 +424,44 @@ def _bounds_report(bounds: MinimaxBounds) -> str:
     )
 
 
+def _value_report(sc: Scenario, value: GameValue, bounds: MinimaxBounds) -> str:
+    """The game's value bracketed (:mod:`.solve.nash`), beside the perfect-information
+    games' bounds."""
+    return "\n".join(
+        [
+            _scenario_line(sc),
+            "  the game's value (both teams at their best, mixed strategies), from the start:",
+            f"    at least {value.lower:.6f}: the equilibrium evader's worst case (the team's"
+            " best response to it)",
+            f"    at most {value.upper:.6f}: the equilibrium team's worst case (the evader's"
+            " best response; the team draws its moves jointly)",
+            f"    from {value.sweeps} Shapley sweeps, each state's game by regret matching+;"
+            f" {value.seconds:.0f} s",
+            f"  the perfect-information games: at least {bounds.lower_from_start:g} (the"
+            f" evader moving first), at most {bounds.upper_from_start:g} (the pursuers"
+            " moving first)",
+        ]
+    )
+
+
+def _game_value(args) -> int:
+    """``--game-value``: solve, print, exit status."""
+    from .solve.minimax import minimax_bounds
+    from .solve.nash import check_game_value, game_value
+
+    args.scenario = args.scenario or "grid"
+    sc = scenario_from_args(args, train=False)
+    try:
+        check_game_value(sc)
+        print(_value_report(sc, game_value(sc), minimax_bounds(sc)))
+    except (TooLargeError, UnsupportedError) as err:
+        raise UsageError(str(err)) from None
+    return 0
+
+
 def _best_response_scenario(args) -> Scenario:
     """``--scenario`` with ``--set``; without ``--scenario``, a run directory's own."""
-    names = PURSUER_NAMES if args.best_response == "evader" else SCRIPTED_EVADERS
+    names = PURSUER_NAMES if args.best_response == "evader" else EVADER_NAMES
     spec = args.pursuers if args.best_response == "evader" else args.evader
     if args.scenario is None and spec is not None and is_run(spec, names):
         trained = run_scenario(spec, names)
@@ -477,6 +521,12 @@ def _main(argv: Sequence[str]) -> int:
         help="solve that team's exact best response to the other team's fixed policy",
     )
     parser.add_argument(
+        "--game-value",
+        action="store_true",
+        help="bracket the game's value with mixed strategies (both teams at their best) by"
+        " the exact worst cases of an equilibrium evader and team; minutes on 5x5",
+    )
+    parser.add_argument(
         "--pursuers",
         metavar="random|oracle|minimax|RUN_DIR",
         help="with --best-response evader: the pursuers' policy (default oracle; minimax:"
@@ -484,8 +534,9 @@ def _main(argv: Sequence[str]) -> int:
     )
     parser.add_argument(
         "--evader",
-        metavar="random|flee|static|RUN_DIR",
-        help="with --best-response pursuers: the evader's policy (default the scenario's)",
+        metavar="random|flee|static|equilibrium|RUN_DIR",
+        help="with --best-response pursuers: the evader's policy (default the scenario's;"
+        " equilibrium: the game's, see --game-value)",
     )
     parser.add_argument(
         "--tol",
@@ -500,6 +551,10 @@ def _main(argv: Sequence[str]) -> int:
         raise UsageError("--pursuers goes with --best-response evader")
     if args.evader is not None and args.best_response != "pursuers":
         raise UsageError("--evader goes with --best-response pursuers")
+    if args.game_value and args.best_response:
+        raise UsageError("--game-value and --best-response are separate questions: give one")
+    if args.game_value:
+        return _game_value(args)
     if args.best_response:
         return _best_response(args)
     args.scenario = args.scenario or "grid"

@@ -13,6 +13,10 @@
   optimal when the evader sees its move, so no evader escapes it longer than the bound
   (grid mode only).
 
+Evaders the solvers give (grid mode only): ``best-response``, the exact best response to the
+pursuers of the pairing, and ``equilibrium``, the game's equilibrium evader
+(:mod:`a2cm_phys.solve.nash`), which no team catches sooner on average than the game's value.
+
 Each is a :data:`~a2cm_phys.rollout.Policy`: ``policy(obs (B, obs_dim), rng) -> actions``.
 
 A :class:`Matchup` is one pairing to play: the game (its evader set to the evader's kind),
@@ -139,6 +143,13 @@ EVADER_POLICIES = ("random", "flee", "static")
 BEST_RESPONSE = "best-response"
 """The evader that is the exact best response to the pursuers (grids the oracle solves)."""
 
+EQUILIBRIUM = "equilibrium"
+"""The game's equilibrium evader (:mod:`a2cm_phys.solve.nash`): mixed, so always sampled;
+no team catches it sooner on average than the game's value (grids, minutes to solve)."""
+
+SOLVED_EVADERS = (BEST_RESPONSE, EQUILIBRIUM)
+"""Evaders the exact solvers give (grids only)."""
+
 
 @dataclass(frozen=True)
 class Matchup:
@@ -164,6 +175,8 @@ def matchup(
     evader_model, evader_name = None, evader or scenario.evader
     if evader == BEST_RESPONSE:
         evader_model, evader_name = best_response_evader(scenario, pursuers), "learned"
+    elif evader == EQUILIBRIUM:
+        evader_model, evader_name = equilibrium_evader(scenario), "learned"
     elif evader is not None and evader not in EVADER_POLICIES:
         run = _run(load_run, "--evader", evader)
         if run.evader is None:
@@ -186,6 +199,8 @@ def matchup(
     e_policy = None if evader_model is None else model_policy(evader_model, greedy)
     if evader == BEST_RESPONSE:  # deterministic: its table has one-hot rows
         e_label, e_policy = BEST_RESPONSE, model_policy(evader_model, greedy=True)
+    if evader == EQUILIBRIUM:  # mixed: its greedy move would be some other policy
+        e_label, e_policy = EQUILIBRIUM, model_policy(evader_model, greedy=False)
     return Matchup(game, pursuer_policy_, e_policy, f"{p_label} vs {e_label} evader")
 
 
@@ -208,9 +223,26 @@ def best_response_evader(scenario: Scenario, pursuers: str):
     return TablePolicy(twin, policy)
 
 
+def equilibrium_evader(scenario: Scenario):
+    """The game's equilibrium evader (:func:`~a2cm_phys.solve.nash.game_value`), as a table
+    policy with the actors' interface (grids only)."""
+    from .solve import TooLargeError, UnsupportedError
+    from .solve.nash import check_game_value, game_value
+    from .solve.tables import TablePolicy
+
+    if scenario.mode != "grid":
+        raise ConfigError("--evader equilibrium: the game's value is solved on grids only")
+    twin = grid_twin(scenario)
+    try:
+        check_game_value(twin)
+    except (TooLargeError, UnsupportedError) as err:
+        raise ConfigError(f"--evader equilibrium: {err}") from None
+    return TablePolicy(twin, game_value(twin).evader)
+
+
 def _run(load, option: str, spec: str):
     """A run directory named by ``option``, or an error that also lists the named policies."""
-    names = PURSUER_POLICIES if option == "--pursuers" else (*EVADER_POLICIES, BEST_RESPONSE)
+    names = PURSUER_POLICIES if option == "--pursuers" else (*EVADER_POLICIES, *SOLVED_EVADERS)
     try:
         return load(spec)
     except ConfigError as err:

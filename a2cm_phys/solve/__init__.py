@@ -12,6 +12,9 @@ fixed policies are given as; :mod:`.best_response` solves the evader's best resp
 pursuer table (finite-horizon backward induction, one step by :mod:`.pursuer_step`) and
 the pursuers' best response to an evader table (the oracle against it); :mod:`.sources`
 builds tables from names (``random``, ``oracle``, ``flee``, ...) and run directories.
+The game's value, both teams at their best: :mod:`.minimax` brackets it by the two games of
+perfect information, :mod:`.nash` computes it with mixed strategies (Shapley's recursion)
+and brackets it by an equilibrium evader's and team's exact worst cases.
 """
 
 from __future__ import annotations

@@ -3,8 +3,9 @@ pursuer team.
 
 In the grid game both teams move at once, so its minimax value (the pursuers minimise,
 the evader maximises ``E[min(T, max_steps)]``) may need mixed strategies in every state:
-a matrix game per state, too many for an exact solution here. Two games of perfect
-information bracket it, and each is a deterministic dynamic programme over joint states:
+a matrix game per state (:mod:`.nash` computes it, bracketed by two policies' exact worst
+cases). Two games of perfect information bracket it more loosely, and each is a
+deterministic dynamic programme over joint states:
 
 - **the evader moves first** (the pursuers see its move), ``V_lo(s) = max_b min_a …``: no
   pursuer team, however it randomises, has a worst case below ``V_lo``;

@@ -4,7 +4,8 @@ accept, as a library.
 Pursuers: ``random`` (uniform), ``oracle`` (the exact optimum of the scenario against its
 scripted evader, from the cache or solved), ``minimax`` (the deterministic team optimal when
 the evader sees its move, :mod:`.minimax`) or a run directory (its trained actors).
-Evader: ``random``, ``flee``, ``static`` or a run directory with a learned evader. Each
+Evader: ``random``, ``flee``, ``static``, ``equilibrium`` (the game's equilibrium evader,
+:mod:`.nash`) or a run directory with a learned evader. Each
 gives a :class:`Source`: the policy table (:mod:`.tables`) and a label to print.
 """
 
@@ -28,6 +29,9 @@ from .tables import (
 
 PURSUER_NAMES = ("random", "oracle", "minimax")
 """Named pursuer policies (anything else is a run directory)."""
+
+EVADER_NAMES = (*SCRIPTED_EVADERS, "equilibrium")
+"""Named evader policies (anything else is a run directory)."""
 
 
 class SourceError(ValueError):
@@ -130,7 +134,8 @@ def evader_source(
     cache_dir: str | Path | None = None,
     use_cache: bool = True,
 ) -> Source:
-    """The evader's table of ``random``, ``flee``, ``static`` or a run directory.
+    """The evader's table of ``random``, ``flee``, ``static``, ``equilibrium`` (the game's,
+    :mod:`.nash`; minutes) or a run directory.
 
     For a scripted evader the oracle against it is loaded from the cache or solved too
     (:attr:`Source.solution`): that is the pursuers' best response.
@@ -140,6 +145,10 @@ def evader_source(
 
         sol = load_or_solve(dataclasses.replace(scenario, evader=spec), cache_dir, use_cache)
         return Source(scripted_evader_table(scenario, spec), f"the {spec} evader", sol)
+    if spec == "equilibrium":
+        from .nash import game_value
+
+        return Source(game_value(scenario).evader, "the game's equilibrium evader")
     trained, model = load_evader_run(spec)
     check_compatible(scenario, trained, spec)
     return Source(_model_table(scenario, model, 1, spec), f"the learned evader of {spec}")
@@ -162,6 +171,7 @@ def run_scenario(spec: str, names: tuple[str, ...]) -> Scenario | None:
 
 
 __all__ = [
+    "EVADER_NAMES",
     "PURSUER_NAMES",
     "Source",
     "SourceError",
