@@ -185,16 +185,21 @@ class OracleSolution:
         return capture_distribution(self.chain, int(self.index(pos)), self.scenario.max_steps)
 
 
-def _save(path: Path, sol: OracleSolution) -> None:
+def _write_npz(path: Path, **arrays: np.ndarray) -> None:
+    """Write ``arrays`` to ``path`` atomically: a concurrent reader never sees half a file."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    lose = np.zeros(0, dtype=bool) if sol.lose is None else sol.lose
     with open(tmp, "wb") as fh:  # a file handle: np.savez would append ".npz" to the name
-        np.savez_compressed(
-            fh, value=sol.value, policy=sol.policy, steps=sol.steps,
-            collisions=sol.collisions, lose=lose, meta=np.array(json.dumps(sol.meta)),
-        )  # fmt: skip
-    os.replace(tmp, path)  # atomic: a concurrent reader never sees half a file
+        np.savez_compressed(fh, **arrays)
+    os.replace(tmp, path)
+
+
+def _save(path: Path, sol: OracleSolution) -> None:
+    lose = np.zeros(0, dtype=bool) if sol.lose is None else sol.lose
+    _write_npz(
+        path, value=sol.value, policy=sol.policy, steps=sol.steps,
+        collisions=sol.collisions, lose=lose, meta=np.array(json.dumps(sol.meta)),
+    )  # fmt: skip
 
 
 def _load(path: Path, model: GridModel) -> OracleSolution | None:
@@ -270,6 +275,76 @@ def load_or_solve(
     else:
         sol.path = None
     return sol
+
+
+VALUE_SOLVER_VERSION = 1
+"""Bumped whenever a change of :mod:`.solve.nash` invalidates cached game values."""
+
+
+def value_cache_key(scenario: Scenario) -> str:
+    """Hash of the scenario fields that define the game's value: the rules and the horizon
+    (not the rewards, nor the evader, whose policy the value is over)."""
+    fields = {
+        "solver": "game-value",
+        "version": VALUE_SOLVER_VERSION,
+        "size": scenario.size,
+        "pursuers": scenario.pursuers,
+        "actions": scenario.actions,
+        "collisions": scenario.collisions.mode,
+        "max_steps": scenario.max_steps,
+    }
+    return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def load_or_solve_value(
+    scenario: Scenario,
+    cache_dir: str | Path | None = None,
+    use_cache: bool = True,
+    solve: bool = True,
+) -> GameValue | None:
+    """The game's value bracketed (:func:`~a2cm_phys.solve.nash.game_value`), from the
+    cache beside the oracle's or solved (minutes; cached when ``use_cache``). A cached value
+    has no ``team`` (100 MB the bracket does not need). ``solve=False``: the cached value
+    or ``None``. Raises the solver's TooLargeError or UnsupportedError."""
+    path = Path(cache_dir or default_cache_dir()) / f"{value_cache_key(scenario)}-value.npz"
+    if use_cache and path.is_file():
+        value = _load_value(path, scenario)
+        if value is not None:
+            return value
+    if not solve:
+        return None
+    from .solve.nash import game_value
+
+    value = game_value(scenario)
+    if use_cache:
+        meta = {"key": value_cache_key(scenario), "start": value.start}
+        meta.update(sweeps=value.sweeps, seconds=value.seconds)
+        try:
+            _write_npz(
+                path, lower=np.array(value.lower), upper=np.array(value.upper),
+                estimate=value.estimate, evader=value.evader, meta=np.array(json.dumps(meta)),
+            )  # fmt: skip
+        except OSError as err:
+            print(f"oracle: warning: cannot write cache {path}: {err.strerror}", file=sys.stderr)
+    return value
+
+
+def _load_value(path: Path, scenario: Scenario) -> GameValue | None:
+    from .solve.nash import GameValue
+    from .solve.tables import n_states
+
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            meta = json.loads(str(data["meta"]))
+            evader = data["evader"]
+            if meta.get("key") != value_cache_key(scenario) or len(evader) != n_states(scenario):
+                return None
+            return GameValue(
+                float(data["lower"]), float(data["upper"]), data["estimate"], evader, None,
+                int(meta["start"]), int(meta["sweeps"]), float(meta["seconds"]), cached=True,
+            )  # fmt: skip
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None  # unreadable or stale: solve again and overwrite it
 
 
 class OraclePolicy:
@@ -436,7 +511,7 @@ def _value_report(sc: Scenario, value: GameValue, bounds: MinimaxBounds) -> str:
             f"    at most {value.upper:.6f}: the equilibrium team's worst case (the evader's"
             " best response; the team draws its moves jointly)",
             f"    from {value.sweeps} Shapley sweeps, each state's game by regret matching+;"
-            f" {value.seconds:.0f} s",
+            f" {value.seconds:.0f} s{' (cached)' if value.cached else ''}",
             f"  the perfect-information games: at least {bounds.lower_from_start:g} (the"
             f" evader moving first), at most {bounds.upper_from_start:g} (the pursuers"
             " moving first)",
@@ -447,13 +522,15 @@ def _value_report(sc: Scenario, value: GameValue, bounds: MinimaxBounds) -> str:
 def _game_value(args) -> int:
     """``--game-value``: solve, print, exit status."""
     from .solve.minimax import minimax_bounds
-    from .solve.nash import check_game_value, game_value
+    from .solve.nash import check_game_value
 
     args.scenario = args.scenario or "grid"
     sc = scenario_from_args(args, train=False)
     try:
         check_game_value(sc)
-        print(_value_report(sc, game_value(sc), minimax_bounds(sc)))
+        value = load_or_solve_value(sc, args.cache_dir, use_cache=not args.no_cache)
+        assert value is not None
+        print(_value_report(sc, value, minimax_bounds(sc)))
     except (TooLargeError, UnsupportedError) as err:
         raise UsageError(str(err)) from None
     return 0

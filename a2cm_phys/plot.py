@@ -9,7 +9,9 @@ error, not an empty figure. Writes ``returns.png``, ``lengths.png``, ``collision
 ``overview.png``; and ``exploitability.png`` when a run logged exact exploitability (grid
 self-play: the evader's best response to the pursuers, i.e. their worst-case capture time,
 and the pursuers' best response to the learned evader, every K updates) against
-environment steps.
+environment steps, with the game's value as a grey band where ``oracle --game-value`` has
+cached it: the pursuers' worst case falls to it from above, the learned evader's rises to it
+from below.
 
 ``--group LABEL=RUN_DIR[,RUN_DIR…]`` (repeatable) or ``--mean`` plots a set of runs as
 seeds: one panel per scenario, one line per label (``--group``'s, else the log's
@@ -217,6 +219,7 @@ def plot_runs(runs: list[Run], labels: list[str], out: Path, window: int) -> lis
         fig = Figure(figsize=(9, 4.8), dpi=120, layout="constrained")
         ax = fig.add_subplot()
         _draw_exploit(ax, runs, labels)
+        _draw_game_values(ax, [r.scenario for r in runs if r.exploit and r.scenario])
         ax.set_title(f"Exploitability (exact best responses){suffix}", fontsize=10)
         fig.savefig(out / EXPLOIT_FILE)
         written.append(out / EXPLOIT_FILE)
@@ -245,6 +248,32 @@ def _draw_exploit(ax: object, runs: list[Run], labels: list[str]) -> None:
     ax.set_ylabel("expected capture time (steps)")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8, framealpha=0.85)
+
+
+def _draw_game_values(ax: object, scenarios: list[Scenario]) -> None:
+    """The game's value of each distinct game, a grey band between its bounds, where it
+    is cached (``oracle --game-value``: minutes to solve, too long for a plot); a note
+    otherwise."""
+    from .oracle import load_or_solve_value, value_cache_key
+
+    seen: set[str] = set()
+    for sc in scenarios:
+        key = value_cache_key(sc)
+        if sc.mode != "grid" or key in seen:
+            continue
+        seen.add(key)
+        value = load_or_solve_value(sc, solve=False)
+        if value is None:
+            print(
+                f"note: the game's value of {sc.name} is not cached; `python -m"
+                f" a2cm_phys.oracle --scenario {sc.name} --game-value` solves it for this figure"
+            )
+            continue
+        label = f"{sc.name}: the game's value, {value.lower:.4g}–{value.upper:.4g}"
+        ax.axhspan(value.lower, value.upper, color="0.55", alpha=0.5, lw=0, zorder=0)
+        ax.axhline(value.lower, color="0.35", ls="--", lw=1.0, label=label)
+    if seen:
+        ax.legend(loc="best", fontsize=8, framealpha=0.85)
 
 
 # --------------------------------------------------------------------------- runs as seeds

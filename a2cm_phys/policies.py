@@ -224,10 +224,12 @@ def best_response_evader(scenario: Scenario, pursuers: str):
 
 
 def equilibrium_evader(scenario: Scenario):
-    """The game's equilibrium evader (:func:`~a2cm_phys.solve.nash.game_value`), as a table
-    policy with the actors' interface (grids only)."""
+    """The game's equilibrium evader (:func:`~a2cm_phys.oracle.load_or_solve_value`: cached
+    beside the oracle, or solved in minutes), as a table policy with the actors' interface
+    (grids only)."""
+    from .oracle import load_or_solve_value
     from .solve import TooLargeError, UnsupportedError
-    from .solve.nash import check_game_value, game_value
+    from .solve.nash import check_game_value
     from .solve.tables import TablePolicy
 
     if scenario.mode != "grid":
@@ -237,7 +239,9 @@ def equilibrium_evader(scenario: Scenario):
         check_game_value(twin)
     except (TooLargeError, UnsupportedError) as err:
         raise ConfigError(f"--evader equilibrium: {err}") from None
-    return TablePolicy(twin, game_value(twin).evader)
+    value = load_or_solve_value(twin)
+    assert value is not None
+    return TablePolicy(twin, value.evader)
 
 
 def _run(load, option: str, spec: str):

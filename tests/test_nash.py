@@ -8,14 +8,15 @@ rules written out in plain Python: Shapley's recursion, exactly, over ``max_step
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.optimize import linprog
 from test_best_response import SMALL, Brute, grid
 
-from a2cm_phys.config import Rewards
-from a2cm_phys.oracle import load_or_solve, main
+from a2cm_phys.config import Rewards, Scenario
+from a2cm_phys.oracle import load_or_solve, load_or_solve_value, main
 from a2cm_phys.solve.best_response import (
     evader_best_response,
     evaluate_tables,
@@ -120,11 +121,13 @@ def test_the_equilibrium_policies_guarantee_their_bounds() -> None:
         assert value.upper <= evader_best_response(sc, table).value_from_start + 1e-9
 
 
-def test_cli_prints_the_bracket(capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_prints_the_bracket(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     value = game_value(grid(size=3, pursuers=2, max_steps=50))
-    assert main([*SMALL, "--game-value"]) == 0
-    out = capsys.readouterr().out
-    assert f"at least {value.lower:.6f}" in out and f"at most {value.upper:.6f}" in out
+    for cached in ("", " (cached)"):  # solved, then read from the cache
+        assert main([*SMALL, "--game-value", "--cache-dir", str(tmp_path)]) == 0
+        out = capsys.readouterr().out
+        assert f"at least {value.lower:.6f}" in out and f"at most {value.upper:.6f}" in out
+        assert out.rstrip().splitlines()[-2].endswith(f" s{cached}")
     assert main([*SMALL, "--game-value", "--best-response", "evader"]) == 2
     assert "separate questions" in capsys.readouterr().err
     assert main([*SMALL, "--game-value", "--set", "collisions.mode=terminate"]) == 2
@@ -133,9 +136,36 @@ def test_cli_prints_the_bracket(capsys: pytest.CaptureFixture[str]) -> None:
     assert "GiB" in capsys.readouterr().err
 
 
-def test_equilibrium_evader_plays_as_its_table_says() -> None:
+def test_cached_value_is_the_solved_one(tmp_path: Path) -> None:
+    sc = grid(size=3, pursuers=2, max_steps=50)
+    assert load_or_solve_value(sc, tmp_path, solve=False) is None
+    solved = load_or_solve_value(sc, tmp_path)
+    (path,) = tmp_path.glob("*-value.npz")
+    for other in (dataclasses.replace(sc, evader="flee"), grid_vs_twin(sc)):
+        cached = load_or_solve_value(other, tmp_path, solve=False)  # one game, one value
+        assert cached.cached and (cached.lower, cached.upper) == (solved.lower, solved.upper)
+        np.testing.assert_array_equal(cached.evader, solved.evader)
+    assert (
+        load_or_solve_value(grid(size=3, pursuers=2, max_steps=40), tmp_path, solve=False) is None
+    )
+    path.write_bytes(b"not a zip file")  # damaged: solved again, and the file replaced
+    again = load_or_solve_value(sc, tmp_path)
+    assert not again.cached and again.lower == solved.lower
+    assert load_or_solve_value(sc, tmp_path, solve=False).cached
+
+
+def grid_vs_twin(sc: Scenario) -> Scenario:
+    """The same game with the learned evader and self-play's rewards."""
+    return dataclasses.replace(sc, evader="learned", rewards=Rewards(step=-2.0, capture=5.0))
+
+
+def test_equilibrium_evader_plays_as_its_table_says(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from a2cm_phys.evaluate import play
     from a2cm_phys.policies import matchup
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))  # where the named policy caches it
 
     sc = grid(size=3, pursuers=2, max_steps=50)
     value = game_value(sc)
@@ -148,11 +178,14 @@ def test_equilibrium_evader_plays_as_its_table_says() -> None:
     assert abs(lengths.mean() - exact) < 4 * se
 
 
-def test_cli_best_response_to_the_equilibrium_evader(capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_best_response_to_the_equilibrium_evader(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
     from a2cm_phys.evaluate import main as evaluate
 
     value = game_value(grid(size=3, pursuers=2, max_steps=50))
-    assert main([*SMALL, "--best-response", "pursuers", "--evader", "equilibrium"]) == 0
+    argv = [*SMALL, "--best-response", "pursuers", "--evader", "equilibrium"]
+    assert main([*argv, "--cache-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "equilibrium evader" in out and f"{value.lower:.3f}" in out
     argv = ["--scenario", "phys_vs", "--pursuers", "pursuit", "--evader", "equilibrium"]

@@ -153,3 +153,36 @@ def test_a_bad_group_is_a_one_line_error(capsys: pytest.CaptureFixture[str]) -> 
     err = capsys.readouterr().err
     assert "--group" in err and err.count("\n") == 1
     assert main([]) == 2
+
+
+def test_exploitability_figure_shows_the_cached_game_value(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from matplotlib.figure import Figure
+
+    from a2cm_phys.config import load_scenario
+    from a2cm_phys.oracle import load_or_solve_value
+    from a2cm_phys.plot import _draw_game_values
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    small = {"size": 3, "pursuers": 2, "max_steps": 50}
+    metrics = {
+        u: {"exploit_worst_case": 9.0 - u / 4, "exploit_pursuers_br": 1.0 + u / 5} for u in (0, 10)
+    }
+    make_log(tmp_path / "sp" / "episodes.mcap", "grid_vs", steps=160, metrics=metrics,
+             log_every=0, overrides=small)  # fmt: skip
+    assert main([str(tmp_path / "sp"), "--out", str(tmp_path / "before")]) == 0
+    assert "--scenario grid_vs --game-value` solves it" in capsys.readouterr().out
+
+    sc = load_run(tmp_path / "sp").scenario
+    value = load_or_solve_value(load_scenario("grid_vs", small))  # what the command caches
+    assert not value.cached and load_or_solve_value(sc, solve=False).cached
+    assert main([str(tmp_path / "sp"), "--out", str(tmp_path / "after")]) == 0
+    assert "not cached" not in capsys.readouterr().out
+    ax = Figure().add_subplot()
+    _draw_game_values(ax, [sc, sc])  # one band a game
+    (band,) = ax.patches
+    low, high = band.get_path().get_extents(band.get_patch_transform()).intervaly
+    assert (low, high) == pytest.approx((value.lower, value.upper))
+    labels = ax.get_legend_handles_labels()[1]
+    assert labels == [f"grid_vs: the game's value, {value.lower:.4g}–{value.upper:.4g}"]

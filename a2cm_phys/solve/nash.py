@@ -67,18 +67,21 @@ class GameValue:
     ``upper``: the equilibrium team's worst case (the value is at most this); ``estimate``:
     the value iteration's own figure from every joint state; ``evader``: the equilibrium
     evader's table ``(S, 1, A)``; ``team``: the equilibrium team's joint distribution
-    ``(S, A^N)`` (the oracle's joint-action layout, :func:`~.tables.joint_policy_table`);
-    ``start``: the default start's index; ``sweeps``: Shapley sweeps run; ``seconds``.
+    ``(S, A^N)`` (the oracle's joint-action layout, :func:`~.tables.joint_policy_table`;
+    ``None`` when loaded from the cache); ``start``: the default start's index; ``sweeps``:
+    Shapley sweeps run; ``seconds``: the solve's; ``cached``: whether loaded from the cache
+    (:func:`a2cm_phys.oracle.load_or_solve_value`).
     """
 
     lower: float
     upper: float
     estimate: np.ndarray
     evader: np.ndarray
-    team: np.ndarray
+    team: np.ndarray | None
     start: int
     sweeps: int
     seconds: float
+    cached: bool = False
 
     @property
     def estimate_from_start(self) -> float:

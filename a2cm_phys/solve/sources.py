@@ -146,9 +146,11 @@ def evader_source(
         sol = load_or_solve(dataclasses.replace(scenario, evader=spec), cache_dir, use_cache)
         return Source(scripted_evader_table(scenario, spec), f"the {spec} evader", sol)
     if spec == "equilibrium":
-        from .nash import game_value
+        from ..oracle import load_or_solve_value
 
-        return Source(game_value(scenario).evader, "the game's equilibrium evader")
+        value = load_or_solve_value(scenario, cache_dir, use_cache)
+        assert value is not None
+        return Source(value.evader, "the game's equilibrium evader")
     trained, model = load_evader_run(spec)
     check_compatible(scenario, trained, spec)
     return Source(_model_table(scenario, model, 1, spec), f"the learned evader of {spec}")
