@@ -4,7 +4,8 @@ One trainer for both algorithms; only the model differs (``make_model``: one cri
 A2CM, N for A2C). Each update collects ``batch_size`` steps (``batch_size / num_envs`` per
 game) and takes one learner step. A run lives in ``<logdir>/<scenario>-<algo>-s<seed>-<time>/``:
 
-- ``config.json``: the resolved scenario and training config and the command line(s);
+- ``config.json``: the resolved scenario and training config, the command line(s) and the
+  library versions of each session;
 - ``checkpoint.pt``: everything to continue exactly (:meth:`Trainer.checkpoint_state`),
   written atomically every ``checkpoint_seconds`` (or ``checkpoint_every`` updates), on
   Ctrl-C and at the end;
@@ -199,13 +200,33 @@ def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
         raise
 
 
+VERSIONED = ("a2cm_phys", "numpy", "torch", "pymunk", "scipy")
+"""The packages whose versions a run records: a rebuilt environment can change a run's
+floats (the same seed's long runs then differ), and the record says which one ran."""
+
+
+def library_versions() -> dict[str, str]:
+    """Python's version and those of :data:`VERSIONED` (``"absent"`` if not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    versions = {"python": sys.version.split()[0]}
+    for name in VERSIONED:
+        try:
+            versions[name] = version(name)
+        except PackageNotFoundError:
+            versions[name] = "absent"
+    return versions
+
+
 def write_config(run_dir: Path, scenario: Scenario, cfg: Train, command: str) -> None:
-    """Write ``config.json``: the resolved scenario and training config, and the command."""
+    """Write ``config.json``: the resolved scenario and training config, the command and
+    the library versions."""
     config = {
         "scenario": to_dict(scenario),
         "train": to_dict(cfg),
         "command": command,
         "created": datetime.now().isoformat(timespec="seconds"),
+        "versions": library_versions(),
     }
     (Path(run_dir) / "config.json").write_text(json.dumps(config, indent=2) + "\n")
 
@@ -217,7 +238,8 @@ def _append_command(run_dir: Path, command: str, update: int, trainer: Trainer) 
     except (OSError, ValueError):  # missing or damaged: the checkpoint has the config
         config = {"scenario": to_dict(trainer.scenario), "rebuilt_from_checkpoint": True}
     config["train"] = to_dict(trainer.cfg)
-    config.setdefault("resumed", []).append({"command": command, "at_update": update})
+    resumed = {"command": command, "at_update": update, "versions": library_versions()}
+    config.setdefault("resumed", []).append(resumed)
     path.write_text(json.dumps(config, indent=2) + "\n")
 
 

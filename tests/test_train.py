@@ -70,6 +70,9 @@ def test_resume_reproduces_uninterrupted_run(tmp_path: Path) -> None:
     _assert_same_run(full, part)
     config = json.loads((part / "config.json").read_text())
     assert config["train"]["updates"] == 20 and len(config["resumed"]) == 1
+    # which libraries computed the floats, at the start and at each resume
+    assert config["versions"]["numpy"] == np.__version__
+    assert config["resumed"][0]["versions"]["torch"] == torch.__version__
 
 
 def test_interrupt_mid_rollout_rewinds_to_last_update(
