@@ -65,7 +65,7 @@ from .solve.best_response import (
     pursuers_best_response,
 )
 from .solve.evaluate import CaptureDistribution, PolicyChain
-from .solve.minimax import MinimaxBounds
+from .solve.minimax import MinimaxBounds, minimax_bounds
 from .solve.pursuer_step import check_size
 from .solve.sources import (
     EVADER_NAMES,
@@ -296,27 +296,31 @@ def value_cache_key(scenario: Scenario) -> str:
     return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]
 
 
+def _value_path(scenario: Scenario, cache_dir: str | Path | None) -> Path:
+    return Path(cache_dir or default_cache_dir()) / f"{value_cache_key(scenario)}-value.npz"
+
+
+def cached_value(scenario: Scenario, cache_dir: str | Path | None = None) -> GameValue | None:
+    """The game's value from the cache (:func:`load_or_solve_value`), or ``None``."""
+    path = _value_path(scenario, cache_dir)
+    return _load_value(path, scenario) if path.is_file() else None
+
+
 def load_or_solve_value(
-    scenario: Scenario,
-    cache_dir: str | Path | None = None,
-    use_cache: bool = True,
-    solve: bool = True,
-) -> GameValue | None:
+    scenario: Scenario, cache_dir: str | Path | None = None, use_cache: bool = True
+) -> GameValue:
     """The game's value bracketed (:func:`~a2cm_phys.solve.nash.game_value`), from the
     cache beside the oracle's or solved (minutes; cached when ``use_cache``). A cached value
-    has no ``team`` (100 MB the bracket does not need). ``solve=False``: the cached value
-    or ``None``. Raises the solver's TooLargeError or UnsupportedError."""
-    path = Path(cache_dir or default_cache_dir()) / f"{value_cache_key(scenario)}-value.npz"
-    if use_cache and path.is_file():
-        value = _load_value(path, scenario)
-        if value is not None:
-            return value
-    if not solve:
-        return None
+    has no ``team`` (100 MB the bracket does not need). Raises the solver's TooLargeError
+    or UnsupportedError."""
+    value = cached_value(scenario, cache_dir) if use_cache else None
+    if value is not None:
+        return value
     from .solve.nash import game_value
 
     value = game_value(scenario)
     if use_cache:
+        path = _value_path(scenario, cache_dir)
         meta = {"key": value_cache_key(scenario), "start": value.start}
         meta.update(sweeps=value.sweeps, seconds=value.seconds)
         try:
@@ -521,15 +525,10 @@ def _value_report(sc: Scenario, value: GameValue, bounds: MinimaxBounds) -> str:
 
 def _game_value(args) -> int:
     """``--game-value``: solve, print, exit status."""
-    from .solve.minimax import minimax_bounds
-    from .solve.nash import check_game_value
-
     args.scenario = args.scenario or "grid"
     sc = scenario_from_args(args, train=False)
     try:
-        check_game_value(sc)
         value = load_or_solve_value(sc, args.cache_dir, use_cache=not args.no_cache)
-        assert value is not None
         print(_value_report(sc, value, minimax_bounds(sc)))
     except (TooLargeError, UnsupportedError) as err:
         raise UsageError(str(err)) from None

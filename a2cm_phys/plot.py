@@ -254,15 +254,14 @@ def _draw_game_values(ax: object, scenarios: list[Scenario]) -> None:
     """The game's value of each distinct game, a grey band between its bounds, where it
     is cached (``oracle --game-value``: minutes to solve, too long for a plot); a note
     otherwise."""
-    from .oracle import load_or_solve_value, value_cache_key
+    from .oracle import cached_value, value_cache_key
 
     seen: set[str] = set()
     for sc in scenarios:
-        key = value_cache_key(sc)
-        if sc.mode != "grid" or key in seen:
+        if sc.mode != "grid" or value_cache_key(sc) in seen:
             continue
-        seen.add(key)
-        value = load_or_solve_value(sc, solve=False)
+        seen.add(value_cache_key(sc))
+        value = cached_value(sc)
         if value is None:
             print(
                 f"note: the game's value of {sc.name} is not cached; `python -m"

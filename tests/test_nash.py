@@ -16,7 +16,7 @@ from scipy.optimize import linprog
 from test_best_response import SMALL, Brute, grid
 
 from a2cm_phys.config import Rewards, Scenario
-from a2cm_phys.oracle import load_or_solve, load_or_solve_value, main
+from a2cm_phys.oracle import cached_value, load_or_solve, load_or_solve_value, main
 from a2cm_phys.solve.best_response import (
     evader_best_response,
     evaluate_tables,
@@ -137,20 +137,18 @@ def test_cli_prints_the_bracket(capsys: pytest.CaptureFixture[str], tmp_path: Pa
 
 def test_cached_value_is_the_solved_one(tmp_path: Path) -> None:
     sc = grid(size=3, pursuers=2, max_steps=50)
-    assert load_or_solve_value(sc, tmp_path, solve=False) is None
+    assert cached_value(sc, tmp_path) is None
     solved = load_or_solve_value(sc, tmp_path)
     (path,) = tmp_path.glob("*-value.npz")
     for other in (dataclasses.replace(sc, evader="flee"), grid_vs_twin(sc)):
-        cached = load_or_solve_value(other, tmp_path, solve=False)  # one game, one value
+        cached = cached_value(other, tmp_path)  # one game, one value
         assert cached.cached and (cached.lower, cached.upper) == (solved.lower, solved.upper)
         np.testing.assert_array_equal(cached.evader, solved.evader)
-    assert (
-        load_or_solve_value(grid(size=3, pursuers=2, max_steps=40), tmp_path, solve=False) is None
-    )
+    assert cached_value(grid(size=3, pursuers=2, max_steps=40), tmp_path) is None
     path.write_bytes(b"not a zip file")  # damaged: solved again, and the file replaced
     again = load_or_solve_value(sc, tmp_path)
     assert not again.cached and again.lower == solved.lower
-    assert load_or_solve_value(sc, tmp_path, solve=False).cached
+    assert cached_value(sc, tmp_path).cached
 
 
 def grid_vs_twin(sc: Scenario) -> Scenario:

@@ -161,7 +161,7 @@ def test_exploitability_figure_shows_the_cached_game_value(
     from matplotlib.figure import Figure
 
     from a2cm_phys.config import load_scenario
-    from a2cm_phys.oracle import load_or_solve_value
+    from a2cm_phys.oracle import cached_value, load_or_solve_value
     from a2cm_phys.plot import _draw_game_values
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
@@ -176,7 +176,7 @@ def test_exploitability_figure_shows_the_cached_game_value(
 
     sc = load_run(tmp_path / "sp").scenario
     value = load_or_solve_value(load_scenario("grid_vs", small))  # what the command caches
-    assert not value.cached and load_or_solve_value(sc, solve=False).cached
+    assert not value.cached and cached_value(sc).cached
     assert main([str(tmp_path / "sp"), "--out", str(tmp_path / "after")]) == 0
     assert "not cached" not in capsys.readouterr().out
     ax = Figure().add_subplot()

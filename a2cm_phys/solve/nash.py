@@ -154,12 +154,17 @@ def _step_values(nxt: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
     return 1.0 + extended[nxt]
 
 
+def _rules(scenario: Scenario) -> tuple[torch.Tensor, torch.Tensor]:
+    """After :func:`check_game_value`: the next states ``(S, A^N, B)`` (int32, half the
+    memory of int64; the capture sentinel ``S``) and the mask of states that cannot occur."""
+    check_game_value(scenario)
+    return torch.from_numpy(transitions(scenario)), torch.from_numpy(~valid_states(scenario))
+
+
 def team_worst_case(scenario: Scenario, team: np.ndarray, tol: float = TOLERANCE) -> np.ndarray:
     """``E[min(T, max_steps)]`` from every joint state when the evader best-responds to the
     joint team table ``team`` ``(S, A^N)``."""
-    check_game_value(scenario)
-    nxt = torch.from_numpy(transitions(scenario))
-    invalid = torch.from_numpy(~valid_states(scenario))
+    nxt, invalid = _rules(scenario)
     return _best_response(nxt, invalid, scenario.max_steps, tol, team=torch.tensor(team))
 
 
@@ -167,14 +172,12 @@ def evader_worst_case(scenario: Scenario, evader: np.ndarray, tol: float = TOLER
     """``E[min(T, max_steps)]`` from every joint state when the pursuers best-respond to the
     evader's table ``evader`` ``(S, 1, A)`` (the scenario's moves: no "stay" column where
     ``actions = 4``; a ``ValueError`` says what is wrong with a table)."""
-    check_game_value(scenario)
     table = check_table(scenario, evader, "evader")
     if table.shape[-1] != scenario.actions:
         raise ValueError(
             f"evader table: {table.shape[-1]} moves, the scenario has {scenario.actions}"
         )
-    nxt = torch.from_numpy(transitions(scenario))
-    invalid = torch.from_numpy(~valid_states(scenario))
+    nxt, invalid = _rules(scenario)
     moves = torch.from_numpy(table[:, 0])
     return _best_response(nxt, invalid, scenario.max_steps, tol, evader=moves)
 
@@ -224,10 +227,8 @@ def game_value(
     with three pursuers on 2 cores. Raises :class:`~.model.UnsupportedError` or
     :class:`~.model.TooLargeError` as :func:`check_game_value`.
     """
-    check_game_value(scenario)
     t0 = time.perf_counter()
-    nxt = torch.from_numpy(transitions(scenario))  # int32: half the memory of int64
-    invalid = torch.from_numpy(~valid_states(scenario))
+    nxt, invalid = _rules(scenario)
     n, joint, moves = nxt.shape
     games_state = _Games(n, joint, moves)
     values = torch.zeros(n)

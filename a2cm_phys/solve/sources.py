@@ -149,7 +149,6 @@ def evader_source(
         from ..oracle import load_or_solve_value
 
         value = load_or_solve_value(scenario, cache_dir, use_cache)
-        assert value is not None
         return Source(value.evader, "the game's equilibrium evader")
     trained, model = load_evader_run(spec)
     check_compatible(scenario, trained, spec)
