@@ -24,12 +24,8 @@ from typing import Any, NoReturn
 
 from .config import ConfigError, Scenario, Train, load_scenario, load_train, parse_assignments
 from .config import preset as preset_values
-
-EXIT_USAGE = 2
-"""Exit status of a bad command line, scenario or input file."""
-
-EXIT_INTERRUPTED = 130
-"""Exit status after Ctrl-C or SIGTERM."""
+from .exitcodes import EXIT_INTERRUPTED, EXIT_NO_SPACE, EXIT_USAGE, OUT_OF_SPACE
+from .rundir import RunBusy, is_run_file
 
 MAX_SEED = 2**64 - 1
 """Largest seed: seeds feed 64-bit generators."""
@@ -55,7 +51,7 @@ def run_cli(body: Callable[[Sequence[str]], int], argv: Sequence[str] | None = N
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         return body(argv)
-    except (UsageError, ConfigError) as err:
+    except (UsageError, ConfigError, RunBusy) as err:
         return fail(str(err))
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
@@ -67,6 +63,9 @@ def run_cli(body: Callable[[Sequence[str]], int], argv: Sequence[str] | None = N
         return 0
     except OSError as err:  # an unreadable input or an unwritable output
         where = f"{err.filename}: " if err.filename else ""
+        if err.errno in OUT_OF_SPACE:  # the machine's fault, not the user's
+            print(f"error: {where}{err.strerror or err} (free some space)", file=sys.stderr)
+            return EXIT_NO_SPACE
         return fail(f"{where}{err.strerror or err}")
 
 
@@ -137,10 +136,17 @@ def check_device(device: str, option: str = "--device") -> None:
 
 def writable_dir(path: str | Path, option: str) -> Path:
     """``path`` as a folder that exists or can be created and written, created by nobody
-    yet: a :class:`UsageError` naming ``option`` if it is a file or cannot be written."""
+    yet: a :class:`UsageError` naming ``option`` if it is empty, a file, a link to nothing,
+    or cannot be written."""
+    if str(path).strip() == "":
+        raise UsageError(f"{option}: an empty folder name (give a folder, e.g. {option} .)")
     path = Path(path)
     probe = path
     while not probe.exists():
+        if probe.is_symlink():
+            raise UsageError(
+                f"{option} {path}: {probe} is a link to {os.readlink(probe)}, which does not exist"
+            )
         if probe.parent == probe:
             break
         probe = probe.parent
@@ -152,9 +158,18 @@ def writable_dir(path: str | Path, option: str) -> Path:
     return path
 
 
-def output_file(path: str | Path, option: str) -> Path:
-    """A file to write: a :class:`UsageError` if it is a folder or its folder can't be made."""
+def output_file(path: str | Path, option: str, suffixes: Sequence[str] = ()) -> Path:
+    """A file to write: a :class:`UsageError`, before anything is opened, if its extension
+    is not one of ``suffixes`` (when given), if it is one of a run's own files (its log,
+    checkpoint, config or summary: an output never replaces them), if it is a folder or if
+    its folder can't be made."""
     path = Path(path)
+    if suffixes and path.suffix.lower() not in suffixes:
+        raise UsageError(f"{option} {path}: expected a {' or '.join(suffixes)} file")
+    if is_run_file(path):
+        raise UsageError(
+            f"{option} {path}: is one of the run's own files; write the output elsewhere"
+        )
     if path.is_dir():
         raise UsageError(f"{option} {path}: is a folder, expected a file name")
     writable_dir(path.parent, option)
@@ -217,7 +232,8 @@ def scenario_from_args(args: argparse.Namespace, *, train: bool = True) -> Scena
 def train_values(args: argparse.Namespace, flags: dict[str, Any] | None = None) -> dict[str, Any]:
     """The training options given: the ``--preset``, then ``--set train.KEY=…``, then
     ``flags`` (the command's explicit options, ``None`` meaning not given)."""
-    values = preset_values(args.preset) if getattr(args, "preset", None) else {}
+    preset = getattr(args, "preset", None)
+    values = preset_values(preset) if preset is not None else {}
     values.update(split_assignments(args.set)[1])
     values.update({k: v for k, v in (flags or {}).items() if v is not None})
     return values

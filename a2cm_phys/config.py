@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import types
 import typing
 from collections.abc import Iterable, Mapping
@@ -18,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 import tomllib
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
@@ -373,8 +375,13 @@ SCENARIO_LIMITS: dict[str, tuple[int, str]] = {
     "size": (1000, "the arena's tables and pictures grow with size²"),
     "pursuers": (64, "one actor per pursuer, each observing every agent"),
     "max_steps": (1_000_000, "an episode's log is buffered in memory until it ends"),
+    "physics.substeps": (
+        10_000,
+        "each is a solver step of every game, about 5 µs: 10,000 already make one step take 50 ms",
+    ),
 }
-"""Largest values a scenario may ask for, with the reason: beyond them memory runs out."""
+"""Largest values a scenario may ask for, with the reason: beyond them memory runs out, or
+a step takes so long that a run seems to hang. A dotted key is a key of a sub-table."""
 
 TRAIN_LIMITS: dict[str, tuple[int, str]] = {
     "num_envs": (65_536, "every game's state is held in memory"),
@@ -397,8 +404,11 @@ def check_limits(obj: Any, limits: Mapping[str, tuple[int, str]]) -> None:
     """Raise ``ValueError`` naming the key of the first value above its limit, or (for a
     scenario) a ``name`` that is not a plain file name (run directories are named after it)."""
     for key, (limit, why) in limits.items():
-        if getattr(obj, key) is not None and getattr(obj, key) > limit:
-            raise _KeyError(key, f"must be at most {limit:,} ({why}), got {getattr(obj, key):,}")
+        value = obj
+        for part in key.split("."):
+            value = getattr(value, part)
+        if value is not None and value > limit:
+            raise _KeyError(key, f"must be at most {limit:,} ({why}), got {value:,}")
     name = getattr(obj, "name", None)
     if name is not None and (not name or name[0] == "." or set(name) & set("/\\\0")):
         raise _KeyError("name", f"must be a file name (no /, \\, no leading '.'), got {name!r}")
@@ -450,6 +460,10 @@ def _build(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
     return cls(**kwargs)
 
 
+_INTEGERS = (int, np.integer)
+_REALS = (int, float, np.integer, np.floating)
+
+
 def _coerce(value: Any, hint: Any, key: str) -> Any:
     origin = typing.get_origin(hint)
     if origin is Literal:
@@ -462,20 +476,22 @@ def _coerce(value: Any, hint: Any, key: str) -> Any:
         if len(args) != 1 or len(typing.get_args(hint)) != 2:
             raise TypeError(f"unsupported annotation for {key}: {hint}")
         return None if value is None else _coerce(value, args[0], key)  # X | None
+    # numpy scalars (np.int64, np.float32, np.bool_) are taken as the Python values they
+    # hold, so that values computed with numpy pass where the same Python numbers do.
     if hint is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, _REALS):
             raise _KeyError(key, f"must be a number, got {value!r}")
         if not math.isfinite(value):
             raise _KeyError(key, f"must be a finite number, got {value!r}")
         return float(value)
     if hint is int:
-        if isinstance(value, bool) or not isinstance(value, int):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, _INTEGERS):
             raise _KeyError(key, f"must be an integer, got {value!r}")
-        return value
+        return int(value)
     if hint is bool:
-        if not isinstance(value, bool):
+        if not isinstance(value, (bool, np.bool_)):
             raise _KeyError(key, f"must be true or false, got {value!r}")
-        return value
+        return bool(value)
     if hint is str and not isinstance(value, str):
         raise _KeyError(key, f"must be a string, got {value!r}")
     return value
@@ -551,12 +567,18 @@ def resolve_scenario_path(scenario: str | Path) -> Path:
 
 
 def read_toml(path: Path) -> dict[str, Any]:
-    """Read a TOML file, turning syntax errors into a :class:`ConfigError` naming the file."""
+    """Read a TOML file, turning syntax errors, text that is not UTF-8 and unreadable files
+    into a :class:`ConfigError` naming the file."""
     try:
         with open(path, "rb") as fh:
             return tomllib.load(fh)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: invalid TOML: {err}") from None
+    except UnicodeDecodeError as err:  # tomllib decodes the whole file before parsing
+        raise ConfigError(
+            f"{path}: not UTF-8 text (TOML files must be UTF-8; byte 0x{err.object[err.start]:02x}"
+            f" at offset {err.start} is not)"
+        ) from None
     except OSError as err:
         raise ConfigError(f"{path}: cannot read: {err.strerror}") from None
 
@@ -567,10 +589,16 @@ def load_scenario(
     """Load a named or file scenario (or take a :class:`Scenario`), apply overrides, validate.
 
     Overrides are checked exactly like the file: ``load_scenario("grid", {"size": 1})``
-    fails with a message naming ``overrides`` and the key ``size``.
+    fails with a message naming ``overrides`` and the key ``size``. A ``scenario`` of any
+    other type (``load_scenario(123)``) is a ``TypeError`` naming the argument.
     """
     if isinstance(scenario, Scenario):
         data, source = to_dict(scenario), f"scenario '{scenario.name}'"
+    elif not isinstance(scenario, (str, os.PathLike)):
+        raise TypeError(
+            "scenario: expected a scenario name (e.g. 'grid'; see scenario_names()), a path"
+            f" to a TOML file or a Scenario, got {type(scenario).__name__} {scenario!r}"
+        )
     else:
         path = resolve_scenario_path(scenario)
         data, source = read_toml(path), str(path)
@@ -724,7 +752,65 @@ def resolve_train(scenario: Scenario, cfg: Train) -> Train:
             f" {unset['batch_size']} is not a multiple of num_envs={cfg.num_envs}; set"
             " batch_size too"
         )
+    check_network_size(scenario, cfg)
     return dataclasses.replace(cfg, **unset) if unset else cfg
+
+
+MAX_WEIGHTS = 100_000_000
+"""Most weights the networks of a run may have (:func:`network_weights`), 400 MB as
+float32. Training holds them with their gradients, the optimiser's state (one more copy
+for RMSprop, two for Adam) and a copy of the actors for rollouts, and every checkpoint
+writes them: about 2 GB at this bound. The shipped configurations need far fewer (the
+``descent`` preset on ``grid_vs``, two layers of 128 over one-hot cells: 133,011); more asked
+for by ``hidden`` and ``layers`` (e.g. 64 layers of 16,384 units, 17 billion weights per
+agent) ran out of memory or allocated for minutes before a run began."""
+
+
+def network_inputs(scenario: Scenario, cfg: Train) -> int:
+    """The length of the networks' input: the observation, or its one-hot cells."""
+    return scenario.obs_dim * (scenario.size if cfg.encoding == "onehot" else 1)
+
+
+def network_weights(scenario: Scenario, cfg: Train) -> int:
+    """How many weights (parameters) the networks of a run of ``cfg`` on ``scenario`` have,
+    counted as :func:`~a2cm_phys.algos.models.make_model` builds them, without building
+    them: every pursuer's actor, the critics (one with A2CM, one per pursuer with A2C), a
+    learned evader's actor and critic, each of ``layers`` hidden layers of ``hidden``
+    units over the observation (or its one-hot cells, ``encoding = "onehot"``)."""
+    hidden, deep = cfg.hidden, cfg.layers - 1
+    inputs = network_inputs(scenario, cfg)
+    outputs = 2 if scenario.continuous else scenario.actions
+    log_std = outputs if scenario.continuous else 0
+
+    def stack(n: int, fan_in: int, fan_out: int) -> int:  # a StackedLinear layer
+        return n * (fan_in * fan_out + fan_out)
+
+    def team(agents: int, critics: int, values: int) -> int:
+        actors = stack(agents, inputs, hidden) + deep * stack(agents, hidden, hidden)
+        actors += stack(agents, hidden, outputs) + agents * log_std
+        critic = stack(critics, inputs, hidden) + deep * stack(critics, hidden, hidden)
+        return actors + critic + stack(critics, hidden, values)
+
+    n = scenario.pursuers
+    weights = team(n, 1 if cfg.algo == "a2cm" else n, 2 if cfg.split_rewards else 1)
+    if scenario.evader == "learned":  # an A2C team of one on one reward (teams.py)
+        weights += team(1, 1, 1)
+    return weights
+
+
+def check_network_size(scenario: Scenario, cfg: Train) -> None:
+    """A :class:`ConfigError` naming ``hidden`` and ``layers`` if the networks would have more
+    than :data:`MAX_WEIGHTS` weights (:func:`network_weights`); nothing is allocated."""
+    weights = network_weights(scenario, cfg)
+    if weights > MAX_WEIGHTS:
+        inputs = "one-hot inputs" if cfg.encoding == "onehot" else "inputs"
+        raise ConfigError(
+            f"training options: keys 'hidden', 'layers': {cfg.layers} hidden layer(s) of"
+            f" {cfg.hidden:,} units for {scenario.pursuers} pursuer(s) over"
+            f" {network_inputs(scenario, cfg):,} {inputs} make networks of"
+            f" {weights:,} weights, more than the {MAX_WEIGHTS:,} a run may have (all held in"
+            " memory several times over); use fewer or narrower layers"
+        )
 
 
 STORED_BEFORE: dict[str, Any] = {"entropy_schedule": "constant"}

@@ -30,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -172,6 +173,8 @@ def matchup(
     from .evaluate import load_run, model_policy
 
     pursuer_run = None if pursuers in PURSUER_POLICIES else _run(load_run, "--pursuers", pursuers)
+    if pursuer_run is not None:
+        check_layout(pursuer_run.scenario, scenario, pursuers, pursuer_run.pursuers)
     evader_model, evader_name = None, evader or scenario.evader
     if evader == BEST_RESPONSE:
         evader_model, evader_name = best_response_evader(scenario, pursuers), "learned"
@@ -181,6 +184,7 @@ def matchup(
         run = _run(load_run, "--evader", evader)
         if run.evader is None:
             raise ConfigError(f"--evader {evader}: the run has no learned evader")
+        check_layout(run.scenario, scenario, evader, run.evader)
         evader_model, evader_name = run.evader, "learned"
     elif evader is None and scenario.evader == "learned":
         if pursuer_run is None or pursuer_run.evader is None:
@@ -202,6 +206,37 @@ def matchup(
     if evader == EQUILIBRIUM:  # mixed: its greedy move would be some other policy
         e_label, e_policy = EQUILIBRIUM, model_policy(evader_model, greedy=False)
     return Matchup(game, pursuer_policy_, e_policy, f"{p_label} vs {e_label} evader")
+
+
+LAYOUT_KEYS = ("mode", "pursuers", "control", "actions")
+"""The scenario keys that decide a trained network's layout: the observation's length
+(``mode``: 2 or 4 numbers per agent; ``pursuers``: how many agents, and actors), and its
+actions (``control``: moves or commands; ``actions``: how many moves)."""
+
+
+def check_layout(trained: Scenario, scenario: Scenario, run: str, model: Any = None) -> None:
+    """A :class:`~a2cm_phys.config.ConfigError` naming ``run`` and the first key of
+    :data:`LAYOUT_KEYS` in which ``scenario`` differs from the one the run was ``trained``
+    on (or ``size``, for networks over one-hot cells, ``model.encoding``): its networks
+    read the trained observation and play the trained actions, and nothing else. A
+    scenario with more moves than the run's (5 with stay, for a run of 4) is accepted: the
+    run plays a subset of them."""
+    keys = [k for k in LAYOUT_KEYS if k != "actions" or not trained.continuous]
+    encoding = getattr(model, "encoding", None)
+    if encoding is not None:  # one-hot inputs: one per cell of the trained arena
+        keys.append("size")
+    for key in keys:
+        want, got = getattr(trained, key), getattr(scenario, key)
+        if key == "actions" and want < got:  # moves are numbered alike: 4 of 5 is a subset
+            continue
+        if want != got:
+            plays = "(vx, vy) commands" if trained.continuous else f"{trained.actions} moves"
+            raise ConfigError(
+                f"run {run} was trained with {key} = {want!r}, but the scenario"
+                f" '{scenario.name}' has {key} = {got!r}: its networks read observations of"
+                f" {trained.obs_dim} numbers and play {plays}; evaluate it on a scenario with"
+                f" the same {', '.join(keys)}"
+            )
 
 
 def best_response_evader(scenario: Scenario, pursuers: str):

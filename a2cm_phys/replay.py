@@ -16,17 +16,21 @@ one message and exit 2.
 from __future__ import annotations
 
 import argparse
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from . import checkpoint
 from .cli import Parser, UsageError, int_range, output_file, positive_float, run_cli
 from .config import Scenario
 from .envs.core import ACTION_NAMES
+from .record.integrity import check_run_log
 from .record.reader import RunLog, Trajectory, read_run
 from .record.schemas import step_seconds
 from .record.verify import verify, verify_trajectory
+from .rundir import SUMMARY_NAME
 
 __all__ = ["EXPORT_TOPIC", "describe", "export_foxglove", "main", "summary_table", "verify",
            "verify_trajectory"]  # fmt: skip
@@ -79,6 +83,24 @@ def summary_table(log: RunLog, parts: int = 10) -> str:
     return "\n".join(lines)
 
 
+def _integrity(path: Path, log: RunLog) -> list[str]:
+    """What breaks the run's invariant (:mod:`a2cm_phys.record.integrity`): the log read
+    with the run's checkpoints and summary when ``path`` is a run directory."""
+    if not path.is_dir():
+        return check_run_log(log)
+    counts, problems = checkpoint.saved_counts(path)
+    summary = None
+    summary_path = path / SUMMARY_NAME
+    if summary_path.exists():
+        try:
+            summary = json.loads(summary_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as err:
+            problems.append(f"{summary_path}: unreadable ({err})")
+        if not isinstance(summary, dict):
+            summary = None
+    return problems + check_run_log(log, counts, summary)
+
+
 def _state(log: RunLog) -> str:
     """How the log (or the run's parts) ended."""
     if log.clean:
@@ -99,6 +121,7 @@ def describe(log: RunLog) -> str:
     meta, sc = log.metadata, log.scenario
     where = log.path if len(log.parts) <= 1 else f"{log.path.parent}/"
     lines = [f"{where}: {_state(log)}"]
+    lines += [f"PROBLEM {p}" for p in log.problems]
     if len(log.parts) > 1:
         names = ", ".join(p.name for p in log.parts)
         lines.append(f"{len(log.parts)} parts (one per session, read as one log): {names}")
@@ -287,9 +310,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _main(argv: Sequence[str]) -> int:
     args = _parser().parse_args(argv)
     if args.out is not None:
-        output_file(args.out, "--out")
+        output_file(args.out, "--out", (f".{args.render}",) if args.render != "text" else ())
     if args.export_foxglove is not None:
-        output_file(args.export_foxglove, "--export-foxglove")
+        output_file(args.export_foxglove, "--export-foxglove", (".mcap",))
     log = read_run(args.file)
     if args.verify:
         if not log.clean:
@@ -297,7 +320,13 @@ def _main(argv: Sequence[str]) -> int:
                   " trajectories")  # fmt: skip
         chosen = None if args.episode is None else [_trajectory(log, e) for e in args.episode]
         status = verify(log, chosen)
-        return 1 if log.damaged else status
+        problems = _integrity(Path(args.file), log)
+        for problem in problems:
+            print(f"INTEGRITY {problem}")
+        n = log.n_episodes
+        verdict = "holds" if not problems else f"BROKEN ({len(problems)} problems)"
+        print(f"integrity: {n:,} episodes, ids 0 to {n - 1:,} each once, none lost: {verdict}")
+        return 1 if problems or log.damaged else status
     if args.export_foxglove:
         n = export_foxglove(log, args.export_foxglove, args.episode)
         print(

@@ -28,14 +28,15 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
+import shutil
 import signal
 import sys
 from collections.abc import Sequence
+from contextlib import ExitStack
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from . import checkpoint
 from .cli import (
     SEED,
     Parser,
@@ -48,29 +49,32 @@ from .cli import (
     writable_dir,
 )
 from .config import Scenario, Train, resolve_train, to_dict
-from .trainer import (
-    EXIT_INTERRUPTED,
-    EXIT_NONFINITE,
-    Trainer,
-    check_run,
-    policy_rng,
+from .exitcodes import EXIT_INTERRUPTED, EXIT_NO_SPACE, EXIT_NONFINITE, EXIT_WORKER_DIED
+from .rundir import (
+    CHECKPOINT_NAME,
+    CONFIG_NAME,
+    LOCK_NAME,
+    LOG_PART,
+    RUN_FILES,
+    remove_stray_temps,
+    run_lock,
+    write_atomic,
 )
+from .rundir import (
+    PREVIOUS_CHECKPOINT_NAME as PREVIOUS_NAME,
+)
+from .trainer import Trainer, check_run, policy_rng
 
 __all__ = [
     "EXIT_INTERRUPTED",
     "EXIT_NONFINITE",
+    "EXIT_NO_SPACE",
     "EXIT_WORKER_DIED",
     "Trainer",
     "build_parser",
     "main",
     "policy_rng",
 ]
-
-EXIT_WORKER_DIED = 4
-"""Exit status when a physics worker died (the checkpoint holds the last whole update)."""
-
-RUN_FILES = ("checkpoint.pt", "config.json", "summary.json", "episodes.mcap")
-"""Files that make a folder a run directory (besides ``episodes-from-*.mcap``)."""
 
 # ---------------------------------------------------------------------- command line
 
@@ -114,8 +118,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--logdir", default="logs", help="parent folder of run directories")
     p.add_argument("--run-dir", help="exact run directory (instead of one under --logdir)")
     p.add_argument("--resume", metavar="RUN_DIR", help="continue a run (--updates may extend it)")
-    p.add_argument("--log-every", type=_EVERY, default=1, help="log every K-th episode (0 none)")
-    p.add_argument("--scene-every", type=_EVERY, default=0, help="scenes every K (0 off)")
+    p.add_argument(
+        "--log-every", type=_EVERY, help="log every K-th episode's trajectory (1; 0: none)"
+    )
+    p.add_argument("--scene-every", type=_EVERY, help="Foxglove scenes every K episodes (0: off)")
     p.add_argument("--no-record", action="store_true", help="no MCAP episode log")
     p.add_argument("--checkpoint-every", type=_EVERY, default=0, help="also save every K updates")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -135,6 +141,8 @@ def make_run_dir(logdir: str | Path, scenario: Scenario, cfg: Train) -> Path:
             path.mkdir(parents=True)
             return path
         except FileExistsError:
+            if not (path.exists() or path.is_symlink()):  # a parent is in the way, not a run
+                raise UsageError(f"--logdir {logdir}: cannot create {path}") from None
             continue
     raise FileExistsError(f"{base}: too many runs with this name")
 
@@ -144,10 +152,10 @@ def check_new_run_dir(run_dir: Path) -> None:
     (a checkpoint: ``--resume`` it) nor a run's files (which a new run would overwrite)."""
     if run_dir.exists() and not run_dir.is_dir():
         raise UsageError(f"--run-dir {run_dir}: is a file")
-    if (run_dir / checkpoint.CHECKPOINT_NAME).exists():
+    if (run_dir / CHECKPOINT_NAME).exists():
         raise UsageError(f"--run-dir {run_dir}: holds a run already (use --resume)")
     found = [f for f in RUN_FILES if (run_dir / f).exists()]
-    found += sorted(p.name for p in run_dir.glob("episodes-from-*.mcap"))
+    found += sorted(p.name for p in run_dir.glob("episodes*.mcap") if LOG_PART.fullmatch(p.name))
     if found:
         raise UsageError(
             f"--run-dir {run_dir}: holds {', '.join(found)} of an earlier run but no checkpoint;"
@@ -156,11 +164,18 @@ def check_new_run_dir(run_dir: Path) -> None:
     writable_dir(run_dir, "--run-dir")
 
 
-def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
+def _check_run_files(run_dir: Path) -> None:
+    """A :class:`UsageError` if one of the run's files is not a file (it could not be
+    written at the end of the session)."""
+    for name in RUN_FILES:
+        path = run_dir / name
+        if path.exists() and not path.is_file():
+            raise UsageError(f"--resume {run_dir}: {path} is not a file (move it away)")
+
+
+def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Trainer:
+    """The trainer of a new or resumed run, with the run's lock entered into ``held``."""
     options = {
-        "record": not args.no_record,
-        "log_every": args.log_every,
-        "scene_every": args.scene_every,
         "checkpoint_every": args.checkpoint_every,
         "progress": not args.no_progress and sys.stderr.isatty(),
     }
@@ -168,12 +183,29 @@ def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
         fixed = [f"--{k.replace('_', '-')}" for k in _TRAIN_FLAGS if k != "updates"]
         given = [f for f in fixed if getattr(args, f[2:].replace("-", "_")) is not None]
         given += ["--scenario"] * bool(args.scenario) + ["--set"] * bool(args.set)
-        given += ["--run-dir"] * bool(args.run_dir) + ["--preset"] * bool(args.preset)
+        given += ["--run-dir"] * bool(args.run_dir) + ["--preset"] * (args.preset is not None)
         if given:
             raise UsageError(f"--resume: {', '.join(given)} cannot change when resuming")
         run = Path(args.resume)
-        writable_dir(run if run.is_dir() else run.parent, "--resume")
-        trainer = Trainer.resume(args.resume, args.updates, **options)
+        run_dir = run if run.is_dir() else run.parent
+        if not run_dir.is_dir():
+            raise UsageError(f"--resume {run}: no such run directory")
+        if run.is_file() and run.name != CHECKPOINT_NAME:
+            raise UsageError(f"--resume {run}: not a run directory or its {CHECKPOINT_NAME}")
+        if not any((run_dir / n).is_file() for n in (CONFIG_NAME, CHECKPOINT_NAME, PREVIOUS_NAME)):
+            raise UsageError(f"--resume {run_dir}: no checkpoint (and no config.json): not a run")
+        writable_dir(run_dir, "--resume")
+        held.enter_context(run_lock(run_dir))
+        remove_stray_temps(run_dir)
+        _check_run_files(run_dir)
+        trainer = Trainer.resume(
+            args.resume,
+            args.updates,
+            record=False if args.no_record else None,
+            log_every=args.log_every,
+            scene_every=args.scene_every,
+            **options,
+        )
         _append_command(trainer.run_dir, command, trainer.update, trainer)
         return trainer
     if not args.scenario:
@@ -184,19 +216,38 @@ def _trainer_from_args(args: argparse.Namespace, command: str) -> Trainer:
     check_run(scenario, cfg)  # before the run directory exists
     if args.run_dir:
         run_dir = Path(args.run_dir)
-        check_new_run_dir(run_dir)
+        if run_dir.exists() and not run_dir.is_dir():
+            raise UsageError(f"--run-dir {run_dir}: is a file")
+        writable_dir(run_dir, "--run-dir")
         existed = run_dir.exists()
         run_dir.mkdir(parents=True, exist_ok=True)
+        lock_existed = (run_dir / LOCK_NAME).exists()
+        held.enter_context(run_lock(run_dir))  # before looking: two new runs race here
+        try:
+            check_new_run_dir(run_dir)
+        except UsageError:  # refused: leave the folder as it was
+            if not lock_existed:
+                (run_dir / LOCK_NAME).unlink(missing_ok=True)
+            raise
     else:
         writable_dir(args.logdir, "--logdir")
         run_dir, existed = make_run_dir(args.logdir, scenario, cfg), False
+        held.enter_context(run_lock(run_dir))
     try:
         write_config(run_dir, scenario, cfg, command)
-        return Trainer(scenario, cfg, run_dir, **options)
+        return Trainer(
+            scenario,
+            cfg,
+            run_dir,
+            record=not args.no_record,
+            log_every=1 if args.log_every is None else args.log_every,
+            scene_every=args.scene_every or 0,
+            **options,
+        )
     except BaseException:  # e.g. no memory for the games: leave no half-made run behind
-        (run_dir / "config.json").unlink(missing_ok=True)
-        if not existed and not any(run_dir.iterdir()):
-            run_dir.rmdir()
+        (run_dir / CONFIG_NAME).unlink(missing_ok=True)
+        if not existed:
+            shutil.rmtree(run_dir, ignore_errors=True)
         raise
 
 
@@ -219,8 +270,8 @@ def library_versions() -> dict[str, str]:
 
 
 def write_config(run_dir: Path, scenario: Scenario, cfg: Train, command: str) -> None:
-    """Write ``config.json``: the resolved scenario and training config, the command and
-    the library versions."""
+    """Write ``config.json`` (atomically): the resolved scenario and training config, the
+    command and the library versions."""
     config = {
         "scenario": to_dict(scenario),
         "train": to_dict(cfg),
@@ -228,19 +279,23 @@ def write_config(run_dir: Path, scenario: Scenario, cfg: Train, command: str) ->
         "created": datetime.now().isoformat(timespec="seconds"),
         "versions": library_versions(),
     }
-    (Path(run_dir) / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    write_atomic(Path(run_dir) / CONFIG_NAME, json.dumps(config, indent=2) + "\n")
 
 
 def _append_command(run_dir: Path, command: str, update: int, trainer: Trainer) -> None:
-    path = run_dir / "config.json"
+    path = run_dir / CONFIG_NAME
     try:
-        config = json.loads(path.read_text())
+        config = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):  # missing or damaged: the checkpoint has the config
+        config = None
+    if not isinstance(config, dict):
         config = {"scenario": to_dict(trainer.scenario), "rebuilt_from_checkpoint": True}
     config["train"] = to_dict(trainer.cfg)
     resumed = {"command": command, "at_update": update, "versions": library_versions()}
-    config.setdefault("resumed", []).append(resumed)
-    path.write_text(json.dumps(config, indent=2) + "\n")
+    if not isinstance(config.get("resumed"), list):
+        config["resumed"] = []
+    config["resumed"].append(resumed)
+    write_atomic(path, json.dumps(config, indent=2) + "\n")
 
 
 def _print_summary(summary: dict[str, Any]) -> None:
@@ -257,12 +312,26 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _main(argv: Sequence[str]) -> int:
     args = build_parser().parse_args(argv)
     command = shlex.join(["python", "-m", "a2cm_phys.train", *argv])
-    trainer = _trainer_from_args(args, command)
-    print(f"run directory: {trainer.run_dir}", file=sys.stderr)
-    try:
-        status = trainer.run()
-    finally:
-        trainer.close()
+    with ExitStack() as held:  # the run's lock, for the whole session
+        trainer = _open_run(args, command, held)
+        print(f"run directory: {trainer.run_dir}", file=sys.stderr)
+        if trainer.resume_note:
+            print(f"note: {trainer.resume_note}", file=sys.stderr)
+        if trainer.finished:
+            print(
+                f"note: the run is at update {trainer.update} of {trainer.cfg.updates}:"
+                " nothing to train (--updates N extends it)",
+                file=sys.stderr,
+            )
+        try:
+            status = trainer.run()
+        finally:
+            trainer.close()
+    return _report(trainer, status)
+
+
+def _report(trainer: Trainer, status: str) -> int:
+    """Print the summary and how the session ended; the exit status."""
     _print_summary(trainer.last_summary)
     resume = f"python -m a2cm_phys.train --resume {shlex.quote(str(trainer.run_dir))}"
     if status == "interrupted":
@@ -280,6 +349,15 @@ def _main(argv: Sequence[str]) -> int:
             file=sys.stderr,
         )
         return EXIT_WORKER_DIED
+    if status == "no_space":
+        print(
+            f"stopped: {trainer.stop_reason}\nthe last good checkpoint (update"
+            f" {trainer.saved_update}) is kept, and the log holds every episode up to it;"
+            f" free some space (or copy {trainer.run_dir} elsewhere) and resume with:"
+            f"\n  {resume}",
+            file=sys.stderr,
+        )
+        return EXIT_NO_SPACE
     if status == "nonfinite":
         print(
             f"stopped: {trainer.stop_reason} at update {trainer.update + 1}; the last"

@@ -44,17 +44,13 @@ from .config import (
 )
 from .descent import ExploitabilityDescent, check_descent
 from .envs.vector import VectorEnv
+from .exitcodes import OUT_OF_SPACE
 from .exploitability import exploitability, solvable
 from .opponents import LATEST, PAIRING_CODES, OpponentPool, Pairing, check_pool
 from .rollout import StepHook, collect
+from .rundir import CONFIG_NAME, SUMMARY_NAME, write_atomic
 from .stats import EpisodeStats
 from .teams import make_teams
-
-EXIT_INTERRUPTED = 130
-"""Exit status after Ctrl-C (a checkpoint was saved; the run can be resumed)."""
-
-EXIT_NONFINITE = 3
-"""Exit status when the loss became NaN/inf (the last good checkpoint is kept)."""
 
 _ROLLOUT, _LEARN, _IDLE = "rollout", "learn", "idle"
 
@@ -157,6 +153,9 @@ class Trainer:
         self.last_summary: dict[str, Any] = {}
         self._last_save = time.perf_counter()
         self._phase = _IDLE
+        self._log: Any = None  # the episode recorder while run() records
+        self._signals: _Signals | None = None  # the stop signals while run() runs
+        self.resume_note: str | None = None  # set by resume() when it fell back
 
     # ------------------------------------------------------------------ state
     def checkpoint_state(self) -> dict[str, Any]:
@@ -173,6 +172,14 @@ class Trainer:
             "env": self.env.state(),
             "stats": self.stats.state(),
             "wall_time": self.wall_time(),
+            # the log is durable up to this episode count when the checkpoint is written
+            "log": {
+                "record": self.record,
+                "log_every": self.log_every,
+                "scene_every": self.scene_every,
+                "part": None if self._log is None else self._log.path.name,
+                "episodes": self.stats.episodes,
+            },
         }
 
     def load_checkpoint_state(self, state: dict[str, Any]) -> None:
@@ -192,22 +199,60 @@ class Trainer:
         self._session_start = time.perf_counter()
 
     @classmethod
-    def resume(cls, run_dir: str | Path, updates: int | None = None, **kwargs: Any) -> Trainer:
-        """A trainer continuing the run in ``run_dir``, optionally extended to ``updates``."""
-        try:
-            state = checkpoint.load(run_dir)
-        except (OSError, ValueError) as err:
-            raise ConfigError(f"--resume: {err}") from None
+    def resume(
+        cls,
+        run_dir: str | Path,
+        updates: int | None = None,
+        *,
+        record: bool | None = None,
+        log_every: int | None = None,
+        scene_every: int | None = None,
+        **kwargs: Any,
+    ) -> Trainer:
+        """A trainer continuing the run in ``run_dir``, optionally extended to ``updates``.
+
+        It continues from the latest good checkpoint (the previous one if the latest is
+        damaged: :attr:`resume_note` then says so), or from update 0 with the run's
+        ``config.json`` if the run never saved one. ``record``, ``log_every`` and
+        ``scene_every`` left ``None`` keep the run's own; a run that logs cannot be
+        resumed without its log (that would lose episodes).
+        """
         run_dir = Path(run_dir)
         if run_dir.is_file():  # the checkpoint itself was given
             run_dir = run_dir.parent
-        scenario = build(Scenario, state["scenario"], f"{run_dir} (checkpoint)")
-        train = stored_train(state["train"])  # written before some options existed?
+        try:
+            state, note = checkpoint.load_latest(run_dir)
+        except FileNotFoundError as err:
+            state, note = None, None
+            if not (run_dir / CONFIG_NAME).is_file():
+                raise ConfigError(f"--resume: {err}") from None
+        except (OSError, ValueError) as err:
+            raise ConfigError(f"--resume: {err}") from None
+        stored, where = _stored_run(run_dir, state)
+        scenario = build(Scenario, stored["scenario"], where)
+        train = stored_train(stored["train"])  # written before some options existed?
+        at = 0 if state is None else state["update"]
         if updates is not None:
+            if updates < at:
+                raise ConfigError(f"--updates {updates}: the run is at update {at} already")
             train["updates"] = updates
-        cfg = load_train(train, f"{run_dir} (checkpoint)")
+        cfg = load_train(train, where)
+        log = (state or {}).get("log") or {}
+        was_recording = bool(log.get("record", True))
+        if record is False and was_recording:
+            raise ConfigError(
+                f"--no-record: {run_dir} logs its episodes; a session without its log would"
+                " lose them (resume it without --no-record)"
+            )
+        kwargs.update(
+            record=was_recording if record is None else record and was_recording,
+            log_every=log.get("log_every", 1) if log_every is None else log_every,
+            scene_every=log.get("scene_every", 0) if scene_every is None else scene_every,
+        )
         trainer = cls(scenario, cfg, run_dir, **kwargs)
-        trainer.load_checkpoint_state(state)
+        if state is not None:
+            trainer.load_checkpoint_state(state)
+        trainer.resume_note = note
         return trainer
 
     def close(self) -> None:
@@ -218,12 +263,28 @@ class Trainer:
         """Seconds spent training in this run, over all sessions."""
         return self._wall_before + time.perf_counter() - self._session_start
 
+    @property
+    def finished(self) -> bool:
+        """Whether the run has taken all its updates."""
+        return self.update >= self.cfg.updates
+
     def save_checkpoint(self, state: dict[str, Any] | None = None) -> None:
-        """Write the checkpoint (atomically) from ``state`` or the current state."""
+        """Write the checkpoint (atomically) from ``state`` or the current state, after
+        making the log durable up to it: every episode the checkpoint counts is on disk
+        before the checkpoint is (see ``docs/design.md``, the run's invariant)."""
         state = state if state is not None else self.checkpoint_state()
-        checkpoint.save(self.run_dir / checkpoint.CHECKPOINT_NAME, state)
-        self.saved_update = int(state["update"])
-        self._last_save = time.perf_counter()
+        signals = self._signals
+        if signals is not None:  # a second Ctrl-C waits for the end of the save
+            signals.in_log = True
+        try:
+            if self._log is not None:
+                self._log.flush(durable=True)
+            checkpoint.save(self.run_dir / checkpoint.CHECKPOINT_NAME, state)
+            self.saved_update = int(state["update"])
+            self._last_save = time.perf_counter()
+        finally:
+            if signals is not None:
+                signals.after_log()
 
     # ------------------------------------------------------------------ training
     def run(self) -> str:
@@ -240,45 +301,77 @@ class Trainer:
         stopped an interrupted run. The run directory is created if it does not exist.
         """
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        if not (self.run_dir / checkpoint.CHECKPOINT_NAME).exists():
-            self.save_checkpoint()  # so there is always a last good checkpoint
-        self._last_save = time.perf_counter()
         status = "done"
-        dead_worker = _worker_error(self.scenario)
         # numpy's BLAS too gets the run's threads (it starts one per core otherwise: two
         # runs on two cores would then run four threads)
         with threadpool_limits(limits=self.cfg.threads), self._signals_deferred() as signals:
-            with self._recorder() as recorder, self._bar() as bar:
-                log = _ShieldedLog(recorder, signals) if recorder is not None else None
-                on_step = log.record_step if log is not None else None
-                try:
-                    while self.update < self.cfg.updates:
-                        if signals.stop_requested:
-                            raise KeyboardInterrupt
-                        self._one_update(on_step)
-                        if log is not None:
-                            log.record_update(self.update, self.last_metrics)
-                        bar.tick()
-                        self._maybe_save()
-                except KeyboardInterrupt:
-                    signals.shield()
-                    status = "interrupted"
-                    if self._phase != _LEARN:  # mid-update weights could be half-stepped
-                        self.save_checkpoint(self._state_at_last_update())
-                except NonFiniteLoss as err:
-                    signals.shield()
-                    status = "nonfinite"
-                    self.stop_reason = str(err)
-                except dead_worker as err:
-                    signals.shield()
-                    status = "worker_died"
-                    self.stop_reason = str(err).splitlines()[0]
-                    self.save_checkpoint(self._state_at_last_update())
-                else:
-                    signals.shield()
-                    self.save_checkpoint()
+            self._signals = signals
+            try:
+                if not (self.run_dir / checkpoint.CHECKPOINT_NAME).exists():
+                    self.save_checkpoint()  # so there is always a last good checkpoint
+                self._last_save = time.perf_counter()
+                status = self._train(signals)
+            except OSError as err:
+                if err.errno not in OUT_OF_SPACE:
+                    raise
+                signals.shield()
+                status, self.stop_reason = "no_space", _os_error_text(err)
             self.stop_signal = signals.received
-            self._write_summary(status)
+            try:
+                self._write_summary(status)
+            except OSError as err:
+                if err.errno not in OUT_OF_SPACE:
+                    raise
+                status = "no_space"
+                self.stop_reason = self.stop_reason or _os_error_text(err)
+            finally:
+                self._signals = None
+        return status
+
+    def _train(self, signals: _Signals) -> str:
+        """The loop of :meth:`run` with the log open; the status it stopped with."""
+        dead_worker = _worker_error(self.scenario)
+        status, save = "done", None
+        with self._recorder() as recorder, self._bar() as bar:
+            self._log = recorder
+            log = _ShieldedLog(recorder, signals) if recorder is not None else None
+            on_step = log.record_step if log is not None else None
+            try:
+                while self.update < self.cfg.updates:
+                    if signals.stop_requested:
+                        raise KeyboardInterrupt
+                    self._one_update(on_step)
+                    if log is not None:
+                        log.record_update(self.update, self.last_metrics)
+                    bar.tick()
+                    self._maybe_save()
+            except KeyboardInterrupt:
+                status = "interrupted"
+                if self._phase != _LEARN:  # mid-update weights could be half-stepped
+                    save = self._state_at_last_update()
+            except NonFiniteLoss as err:
+                status, self.stop_reason = "nonfinite", str(err)
+            except dead_worker as err:
+                status, self.stop_reason = "worker_died", str(err).splitlines()[0]
+                save = self._state_at_last_update()
+            except OSError as err:
+                if err.errno not in OUT_OF_SPACE:
+                    raise
+                status, self.stop_reason = "no_space", _os_error_text(err)
+            else:  # (a finished run resumed for nothing keeps its checkpoints as they are)
+                save = self.checkpoint_state() if self.update != self.saved_update else None
+            signals.shield()
+            try:
+                if save is not None:
+                    self.save_checkpoint(save)
+            except OSError as err:
+                if err.errno not in OUT_OF_SPACE:
+                    raise
+                status, self.stop_reason = "no_space", _os_error_text(err)
+            finally:
+                self._log = None
+            if status == "no_space" and recorder is not None:
+                recorder.abandon()  # writing more would fail too; the checkpoint's part is durable
         return status
 
     def _one_update(self, on_step: StepHook | None) -> None:
@@ -352,8 +445,9 @@ class Trainer:
                 signal.signal(s, handler if handler is not None else signal.SIG_DFL)
 
     def _recorder(self) -> Any:
-        """The MCAP episode recorder, or a null context when it is not available."""
-        recorder = open_recorder(self) if self.record else None
+        """The MCAP episode recorder, or a null context when the run does not record (or
+        has nothing left to train: a finished run gets no new, empty part)."""
+        recorder = open_recorder(self) if self.record and not self.finished else None
         return recorder if recorder is not None else nullcontext()
 
     def _bar(self) -> _Progress:
@@ -424,7 +518,7 @@ class Trainer:
             k: None if isinstance(v, float) and not math.isfinite(v) else v
             for k, v in self.last_summary.items()
         }
-        (self.run_dir / "summary.json").write_text(json.dumps(strict, indent=2) + "\n")
+        write_atomic(self.run_dir / SUMMARY_NAME, json.dumps(strict, indent=2) + "\n")
 
 
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -487,6 +581,31 @@ class _ShieldedLog:
         self.signals.after_log()
 
 
+def _os_error_text(err: OSError) -> str:
+    """``FILE: reason`` of a failed write."""
+    where = f"{err.filename}: " if err.filename else ""
+    return f"{where}{err.strerror or err}"
+
+
+def _stored_run(run_dir: Path, state: dict[str, Any] | None) -> tuple[dict[str, Any], str]:
+    """The scenario and training options to resume with, and where they come from: the
+    checkpoint, or ``config.json`` for a run that never saved one."""
+    if state is not None:
+        return state, f"{run_dir} (checkpoint)"
+    path = run_dir / CONFIG_NAME
+    try:
+        config = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as err:
+        raise ConfigError(f"--resume: {path}: no checkpoint, and unreadable ({err})") from None
+    if not (
+        isinstance(config, dict)
+        and isinstance(config.get("scenario"), dict)
+        and isinstance(config.get("train"), dict)
+    ):
+        raise ConfigError(f"--resume: {path}: no checkpoint, and no scenario and train in it")
+    return config, f"{path}"
+
+
 def _worker_error(scenario: Scenario) -> type[Exception]:
     """The exception of a dead physics worker (a class never raised in grid mode, so that
     grid runs do not import the physics engine)."""
@@ -512,16 +631,23 @@ def open_recorder(trainer: Trainer) -> Any:
         from .record.writer import EpisodeRecorder
     except ImportError:  # the record package is optional for training
         return None
-    from .record.parts import new_part
+    from .record.parts import new_part, part_files
 
     # A resumed session continues the log in a file of its own (an earlier one may have been
     # cut short by a crash, or got ahead of the checkpoint), on the same clock and episode
     # ids; readers let each part supersede what earlier parts logged from its start on. The
     # games caught mid-episode get a summary without a trajectory.
     step = trainer.update * trainer.cfg.steps_per_env
-    part = {"update": trainer.update, "episode": trainer.stats.episodes, "step": step}
+    path, session = new_part(trainer.run_dir, trainer.update)
+    part = {
+        "session": session,
+        "update": trainer.update,
+        "episode": trainer.stats.episodes,
+        "step": step,
+        "after": [p.name for p in part_files(trainer.run_dir)],
+    }
     recorder = EpisodeRecorder(
-        new_part(trainer.run_dir, trainer.update),
+        path,
         trainer.scenario,
         {"train": to_dict(trainer.cfg), "part": part},
         log_every=trainer.log_every,

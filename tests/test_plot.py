@@ -43,8 +43,12 @@ def test_plot_writes_png_figures_for_overlaid_runs(
 
 
 def test_a_runs_log_parts_are_read_in_session_order(tmp_path: Path) -> None:
+    """Parts named by older versions (``episodes-from-UUUUUU[-K]``) come first, in their
+    order; numbered ones follow by session, whatever update they resumed from (a session
+    resumed from a previous checkpoint starts at an earlier update than the one before)."""
     names = ["episodes-from-000010-2.mcap", "episodes-from-000003.mcap", "episodes.mcap",
-             "episodes-from-000010.mcap", "episodes-other.mcap"]  # fmt: skip
+             "episodes-012-from-000004.mcap", "episodes-from-000010.mcap",
+             "episodes-009-from-000020.mcap", "episodes-other.mcap"]  # fmt: skip
     for name in names:
         (tmp_path / name).touch()
     assert [p.name for p in log_files(tmp_path)] == [
@@ -52,9 +56,11 @@ def test_a_runs_log_parts_are_read_in_session_order(tmp_path: Path) -> None:
         "episodes-from-000003.mcap",
         "episodes-from-000010.mcap",
         "episodes-from-000010-2.mcap",
+        "episodes-009-from-000020.mcap",
+        "episodes-012-from-000004.mcap",
     ]
-    assert new_part(tmp_path, 10).name == "episodes-from-000010-3.mcap"
-    assert new_part(tmp_path / "new", 0).name == "episodes.mcap"
+    assert new_part(tmp_path, 10) == (tmp_path / "episodes-013-from-000010.mcap", 13)
+    assert new_part(tmp_path / "new", 0) == (tmp_path / "new" / "episodes.mcap", 0)
 
 
 def test_an_empty_or_damaged_log_is_an_error_not_an_empty_figure(

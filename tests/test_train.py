@@ -222,7 +222,7 @@ def test_every_scenario_trains_a_few_updates(tmp_path: Path, name: str) -> None:
             "'workers': 2 processes for num_envs=1",
         ),
         (["--updates", "3"], "--scenario is required"),
-        (["--resume", "does/not/exist"], "no checkpoint"),
+        (["--resume", "does/not/exist"], "no such run directory"),
     ],
 )
 def test_cli_errors_exit_2_with_one_line(
@@ -290,7 +290,8 @@ def test_a_resumed_run_continues_its_episode_log(tmp_path, monkeypatch):
     monkeypatch.setattr(Trainer, "_one_update", original)
     assert train_main(["--resume", str(run_dir), "--no-progress"]) == 0
     logs = [read_run(f) for f in log_files(run_dir)]
-    assert [f.name for f in log_files(run_dir)] == ["episodes.mcap", "episodes-from-000006.mcap"]
+    names = [f.name for f in log_files(run_dir)]
+    assert names == ["episodes.mcap", "episodes-001-from-000006.mcap"]
     ids = [int(i) for lg in logs for i in lg.episodes["episode"]]
     summary = json.loads((run_dir / "summary.json").read_text())
     assert ids == list(range(summary["episodes"]))

@@ -72,7 +72,7 @@ def test_a_log_ahead_of_its_checkpoint_counts_each_episode_once(tmp_path, capsys
     capsys.readouterr()
     assert replay_main([str(run_dir)]) == 0
     out = capsys.readouterr().out
-    assert f"{n} episodes" in out and "episodes-from-000005" in out
+    assert f"{n} episodes" in out and "episodes-001-from-000005" in out
 
 
 def test_a_second_interrupt_never_cuts_the_log(tmp_path, monkeypatch, capsys):

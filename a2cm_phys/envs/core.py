@@ -266,12 +266,39 @@ def check_commands(actions: np.ndarray, names: Sequence[str]) -> None:
         )
 
 
-def check_joint_actions(scenario: Scenario, actions: np.ndarray) -> None:
-    """The checks of :func:`check_commands` or :func:`check_actions`, by control type."""
+def check_joint_actions(
+    scenario: Scenario, actions: object, num_envs: int | None = None
+) -> np.ndarray:
+    """The pursuers' actions of a batch as an array (``actions`` itself if it is one), or a
+    ``ValueError``: of the wrong shape (naming the expected ``(B, N)``, or ``(B, N, 2)``
+    with continuous control; ``B`` is ``num_envs`` if given), moves that are not integers
+    (NaN, floats, bools) or out of range, or commands that are not finite numbers (the
+    checks of :func:`check_commands` and :func:`check_actions`). Cheap: one shape and one
+    dtype comparison, then one vectorised range or finiteness test."""
+    array = np.asarray(actions)
+    n = scenario.pursuers
     if scenario.continuous:
-        check_commands(actions, scenario.agents)
+        shape, what = f"(B, {n}, 2)", "one finite (vx, vy) command per pursuer"
+        ok = array.ndim == 3 and array.shape[1:] == (n, 2)
     else:
-        check_actions(actions, scenario.actions, scenario.agents)
+        shape, what = f"(B, {n})", f"one integer move in [0, {scenario.actions}) per pursuer"
+        ok = array.ndim == 2 and array.shape[1] == n
+    if num_envs is not None:
+        shape = shape.replace("B", f"B = {num_envs}")
+        ok = ok and array.shape[0] == num_envs
+    if not ok:
+        raise ValueError(f"expected actions of shape {shape} ({what}), got shape {array.shape}")
+    if scenario.continuous:
+        check_commands(array, scenario.agents)
+        return array
+    if array.dtype.kind not in "iu":  # NaN, floats and bools would index the move table
+        nan = " holding NaN" if array.dtype.kind == "f" and np.isnan(array).any() else ""
+        raise ValueError(
+            f"expected integer moves in [0, {scenario.actions}) of shape {shape}, got"
+            f" dtype {array.dtype}{nan}"
+        )
+    check_actions(array, scenario.actions, scenario.agents)
+    return array
 
 
 def check_actions(actions: np.ndarray, n_actions: int, names: Sequence[str]) -> None:

@@ -32,7 +32,13 @@ class Game:
         self.last: StepOutcome | None = None
 
     def reset(self, seed: int | None = None, options: Mapping[str, Any] | None = None) -> int:
-        """Start an episode; returns its episode seed. ``options["positions"]`` places agents."""
+        """Start an episode; returns its episode seed. ``options["positions"]`` places agents;
+        ``options`` that is not a dict (or ``None``) is a ``TypeError`` naming it."""
+        if options is not None and not isinstance(options, Mapping):
+            raise TypeError(
+                "reset: options must be a dict (e.g. {'positions': {agent: (x, y)}}) or None,"
+                f" got {type(options).__name__} {options!r}"
+            )
         if seed is not None or self._seeds is None:
             self._seeds = np.random.default_rng(seed)
         episode_seed = int(self._seeds.integers(0, 2**63))

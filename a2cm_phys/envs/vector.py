@@ -88,9 +88,11 @@ class VectorEnv:
         self._evader_return = np.zeros(num_envs)
         self._collisions = np.zeros(num_envs, dtype=np.int64)
         self._walls = np.zeros(num_envs, dtype=np.int64)
+        self._closed = False
 
     def reset(self, seed: int) -> np.ndarray:
         """Seed the episode-seed generator, start every game, return the observations."""
+        self._check_open("reset")
         self._seeds = np.random.default_rng(seed)
         envs = np.arange(self.num_envs)
         self._start(envs)
@@ -123,6 +125,7 @@ class VectorEnv:
 
     def load_state(self, state: Mapping[str, Any]) -> np.ndarray:
         """Restore what :meth:`state` returned; return the observations to act on next."""
+        self._check_open("load_state")
         self._seeds = np.random.default_rng()
         self._seeds.bit_generator.state = state["seeds"]
         if state["core"] is not None and hasattr(self.core, "load_state"):
@@ -147,10 +150,15 @@ class VectorEnv:
     ) -> VecStep:
         """Step every game with pursuer ``actions`` ``(B, N)`` (``(B, N, 2)`` commands with
         continuous control) and a learned evader's ``evader_actions`` ``(B,)`` (``(B, 2)``);
-        restart finished games. ``validate=False`` skips the pursuers' checks; the evader's
-        (required with a learned evader, refused otherwise) are always made."""
+        restart finished games. Invalid pursuer actions (shape, type, range, NaN) are a
+        ``ValueError`` naming the expected shape or the agent; ``validate=False`` (the
+        trainer's, whose actions come from its own actors) skips those checks; the evader's
+        (required with a learned evader, refused otherwise) are always made. After
+        :meth:`close` every step is a ``RuntimeError``."""
+        if self._closed:
+            self._check_open("step")
         if validate:
-            check_joint_actions(self.scenario, actions)
+            actions = check_joint_actions(self.scenario, actions, self.num_envs)
         core = self.core
         seeds, lengths = core.episode_seed.copy(), core.t + 1
         out = core.step(actions, evader_actions)
@@ -200,7 +208,15 @@ class VectorEnv:
         )
 
     def close(self) -> None:
-        """Stop worker processes, if any."""
+        """Stop worker processes, if any; the env then refuses to step or reset."""
+        self._closed = True
         close = getattr(self.core, "close", None)
         if close is not None:
             close()
+
+    def _check_open(self, method: str) -> None:
+        """A ``RuntimeError`` if the env was closed."""
+        if self._closed:
+            raise RuntimeError(
+                f"VectorEnv.{method}() called after close(): this env is closed; make a new one"
+            )

@@ -1,13 +1,19 @@
-"""A run's log in parts: ``episodes.mcap``, then one ``episodes-from-NNNNNN[-K].mcap`` per
-resumed session (``NNNNNN`` the update it resumed from, ``K`` counting sessions that resumed
-from the same checkpoint).
+"""A run's log in parts: ``episodes.mcap``, then one ``episodes-KKK-from-UUUUUU.mcap`` per
+resumed session (``KKK`` the session, counting from 1; ``UUUUUU`` the update it resumed
+from). Runs resumed before sessions were numbered have parts ``episodes-from-UUUUUU[-K].mcap``
+instead; they are read in their order (before any numbered part).
 
-A session resumes from the last checkpoint, so the part it writes repeats whatever earlier
-parts logged after that checkpoint (a run killed between two checkpoints has logged more
-than it saved). Each part records where it starts (metadata ``part``: update, episode id,
-step), and :func:`read_run_dir` keeps from each part only what comes before the start of
-the next one: every episode and update of the run once, in order, however many times it
-was killed and resumed.
+A session resumes from the last checkpoint, and the trainer makes the log durable up to a
+checkpoint before it writes that checkpoint; so the parts before a session hold every
+episode up to its start, and the part it writes repeats whatever they logged after it (a
+run killed between two checkpoints has logged more than it saved). Each part records where
+it starts (metadata ``part``: session, update, episode id, step, and the parts that existed
+before it), and :func:`read_run_dir` keeps from each part only the episodes before the
+start of every later part: every episode and update of the run exactly once, in order,
+however many times it was killed and resumed, and whichever checkpoint it resumed from.
+
+A part that cannot be read at all (empty, cut before its metadata, overwritten) is skipped
+and named in :attr:`RunLog.problems`; it never hides the other parts.
 """
 
 from __future__ import annotations
@@ -23,59 +29,76 @@ from .reader import LogError, RunLog, read_file
 FIRST_PART = "episodes.mcap"
 """File name of a run's first log part."""
 
-_PART = re.compile(r"episodes-from-(\d+)(?:-(\d+))?\.mcap")
+_LEGACY = re.compile(r"episodes-from-(\d+)(?:-(\d+))?\.mcap")
+_NUMBERED = re.compile(r"episodes-(\d+)-from-(\d+)\.mcap")
 
 
-def _order(path: Path) -> tuple[int, int]:
+def _order(path: Path) -> tuple[int, int, int]:
     if path.name == FIRST_PART:
-        return (0, 0)
-    match = _PART.fullmatch(path.name)
-    assert match is not None
-    return (int(match[1]), int(match[2] or 1))
+        return (0, 0, 0)
+    legacy = _LEGACY.fullmatch(path.name)
+    if legacy is not None:
+        return (1, int(legacy[1]), int(legacy[2] or 1))
+    numbered = _NUMBERED.fullmatch(path.name)
+    assert numbered is not None
+    return (2, int(numbered[1]), 0)
+
+
+def _is_part(path: Path) -> bool:
+    name = path.name
+    return name == FIRST_PART or bool(_LEGACY.fullmatch(name) or _NUMBERED.fullmatch(name))
 
 
 def part_files(run_dir: str | Path) -> list[Path]:
     """The log parts of a run folder, in the order the sessions wrote them."""
-    run_dir = Path(run_dir)
-    parts = [
-        p for p in run_dir.glob("episodes*.mcap") if p.name == FIRST_PART or _PART.fullmatch(p.name)
-    ]
-    return sorted(parts, key=_order)
+    return sorted((p for p in Path(run_dir).glob("episodes*.mcap") if _is_part(p)), key=_order)
 
 
-def new_part(run_dir: str | Path, update: int) -> Path:
-    """The file a session starting at ``update`` logs to (never an existing one)."""
+def new_part(run_dir: str | Path, update: int) -> tuple[Path, int]:
+    """``(file, session)`` for a session starting at ``update``: never an existing file,
+    and numbered after every existing part."""
     run_dir = Path(run_dir)
-    if not part_files(run_dir):
-        return run_dir / FIRST_PART
-    k = 1
-    while True:
-        path = run_dir / f"episodes-from-{update:06d}{'' if k == 1 else f'-{k}'}.mcap"
-        if not path.exists():
-            return path
-        k += 1
+    parts = part_files(run_dir)
+    if not parts:
+        return run_dir / FIRST_PART, 0
+    numbered = [_order(p)[1] for p in parts if _order(p)[0] == 2]
+    session = max(len(parts), max(numbered, default=0) + 1)
+    return run_dir / f"episodes-{session:03d}-from-{update:06d}.mcap", session
 
 
 def read_run_dir(run_dir: str | Path) -> RunLog:
     """Every part of a run as one :class:`RunLog` (see the module docstring).
 
-    ``parts`` lists the files read; ``clean`` is true if every part was closed cleanly,
-    ``damaged``/``error`` describe the first damaged or cut part.
+    ``parts`` lists the files read; ``clean`` is true if every part was closed cleanly;
+    ``error`` describes the first damaged or cut part; ``problems`` names every part that
+    could not be read, or was damaged, and every earlier part a later one names that is
+    missing.
     """
     run_dir = Path(run_dir)
     files = part_files(run_dir)
     if not files:
         raise LogError(f"{run_dir}: no episodes.mcap in this folder")
-    logs = [read_file(f) for f in files]
+    logs, problems = [], []
+    for f in files:
+        try:
+            logs.append(read_file(f))
+        except LogError as err:
+            problems.append(f"{f.name}: unreadable, skipped ({_reason(err, f)})")
+    if not logs:
+        raise LogError(f"{run_dir}: no readable log part ({'; '.join(problems)})")
+    problems += _missing_parts(logs, {f.name for f in files})
+    problems += [f"{lg.path.name}: {lg.error}" for lg in logs if lg.damaged]
+    problems += [p for lg in logs for p in lg.problems]
     starts = [_start(lg) for lg in logs]
-    merged = logs[0]
     if len(logs) == 1:
-        return replace(merged, parts=files)
+        return replace(logs[0], path=run_dir / FIRST_PART, parts=files, problems=problems)
     # Optional columns (``evader_return``) absent from a part (e.g. one with no episode) are NaN.
     columns: dict[str, list[np.ndarray]] = {k: [] for lg in logs for k in lg.episodes}
     updates, blocks, where = [], [], {}
     for i, lg in enumerate(logs):
-        end_episode, end_update = starts[i + 1] if i + 1 < len(logs) else (None, None)
+        later = [s for s in starts[i + 1 :] if s is not None]
+        end_episode = min((s[0] for s in later), default=None)
+        end_update = min((s[1] for s in later), default=None)
         ids = lg.episodes["episode"]
         keep = np.ones(len(ids), dtype=bool) if end_episode is None else ids < end_episode
         for k in columns:
@@ -89,27 +112,49 @@ def read_run_dir(run_dir: str | Path) -> RunLog:
     first_bad = next((lg for lg in logs if not lg.clean), None)
     return RunLog(
         path=run_dir / FIRST_PART,
-        metadata=merged.metadata,
+        metadata=logs[0].metadata,
         episodes={k: np.concatenate(v) for k, v in columns.items()},
         updates=updates,
-        clean=first_bad is None,
+        clean=first_bad is None and not problems,
         error=None if first_bad is None else f"{first_bad.path.name}: {first_bad.error}",
         damaged=any(lg.damaged for lg in logs),
         topic_counts={t: sum(lg.topic_counts.get(t, 0) for lg in logs) for t in _topics(logs)},
         parts=files,
+        problems=problems,
         _blocks=blocks,
         _where=where,
     )
 
 
-def _start(log: RunLog) -> tuple[int, int]:
-    """(first episode id, first update) of a part: from its metadata, else from its data."""
+def _reason(err: LogError, path: Path) -> str:
+    text = str(err)
+    prefix = f"{path}: "
+    return text[len(prefix) :] if text.startswith(prefix) else text
+
+
+def _missing_parts(logs: list[RunLog], present: set[str]) -> list[str]:
+    """Parts that a part's metadata names as written before it but that are gone."""
+    out = []
+    for lg in logs:
+        part = lg.metadata.get("part")
+        before = part.get("after", []) if isinstance(part, dict) else []
+        for name in before:
+            if name not in present:
+                out.append(f"{name}: missing (named by {lg.path.name} as an earlier part)")
+    return sorted(set(out))
+
+
+def _start(log: RunLog) -> tuple[int, int] | None:
+    """(first episode id, first update) of a part: from its metadata, else from its data
+    (``None`` for a part that says nothing of where it starts and holds no episode)."""
     part = log.metadata.get("part")
     if isinstance(part, dict):
         return int(part["episode"]), int(part["update"])
     ids = log.episodes["episode"]
+    if not len(ids):
+        return None
     first_update = min((u["update"] for u in log.updates), default=1) - 1
-    return (int(ids.min()) if len(ids) else 0), first_update
+    return int(ids.min()), first_update
 
 
 def _topics(logs: list[RunLog]) -> list[str]:

@@ -157,6 +157,7 @@ class RunLog:
     damaged: bool = False  # closed cleanly, but a record fails its checks (not a crash)
     parts: list[Path] = field(default_factory=list)  # the files read (a run folder: all parts)
     topic_counts: dict[str, int] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)  # parts unreadable, damaged or missing
     _blocks: list[bytes] = field(default_factory=list, repr=False)
     _where: dict[int, int] = field(default_factory=dict, repr=False)
     _cache: tuple[int, dict[int, Trajectory]] | None = field(default=None, repr=False)
@@ -198,9 +199,12 @@ class RunLog:
         return self._cache[1][episode]
 
     def trajectories(self) -> Iterator[Trajectory]:
-        """Every logged trajectory, in the order they were written."""
-        for data in self._blocks:
-            yield from Trajectory.from_block(json.loads(data))
+        """Every logged trajectory of the run once, in the order they were written (in a run
+        of several parts, not those a later part superseded)."""
+        for block, data in enumerate(self._blocks):
+            for traj in Trajectory.from_block(json.loads(data)):
+                if self._where.get(traj.episode) == block:
+                    yield traj
 
 
 def _decode_metadata(data: dict[str, str]) -> dict[str, Any]:
@@ -243,6 +247,7 @@ class _Collector:
         self.counts: dict[str, int] = {}
         self.topics: dict[int, str] = {}
         self.footer = False
+        self.repeated: list[int] = []  # episodes whose trajectory came twice
 
     def take(self, record: Any) -> None:
         if isinstance(record, Message):
@@ -252,6 +257,8 @@ class _Collector:
                 self.summaries.append(json.loads(record.data))
             elif topic == TRAJECTORY_TOPIC:
                 for episode in _episode_ids(record.data):
+                    if episode in self.where:
+                        self.repeated.append(episode)
                     self.where[episode] = len(self.blocks)
                 self.blocks.append(record.data)
             elif topic == UPDATE_TOPIC:
@@ -300,6 +307,7 @@ def read_file(path: str | Path) -> RunLog:
         damaged=damaged,
         parts=[path],
         topic_counts=got.counts,
+        problems=[f"{path.name}: episode {e}'s trajectory is logged twice" for e in got.repeated],
         _blocks=got.blocks,
         _where=got.where,
     )

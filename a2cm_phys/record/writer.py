@@ -19,8 +19,11 @@ Topics, schemas and the time base are described in :mod:`.schemas`.
 
 from __future__ import annotations
 
+import contextlib
 import datetime
+import errno
 import json
+import os
 import shlex
 import sys
 import time
@@ -30,6 +33,7 @@ from typing import Any
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
+from .. import __version__
 from ..config import Scenario, to_dict
 from ..envs.vector import EpisodeSummary, VecStep, VectorEnv
 from .block import Block
@@ -90,20 +94,26 @@ class EpisodeRecorder:
         self._step_ns = round(self.dt * _NS)  # the clock in integer nanoseconds: exact
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._fh = open(self.path, "wb")  # noqa: SIM115 - closed in close()
-        from .. import __version__
-
-        self._writer = Writer(self._fh, chunk_size=1 << 62, compression=CompressionType.ZSTD)
-        self._writer.start(library=f"a2cm_phys {__version__}")
-        self._writer.add_metadata(METADATA_NAME, self._metadata(dict(metadata or {}), __version__))
-        self._fh.flush()
-        self._channels = {
-            topic: self._writer.register_channel(
-                topic,
-                "json",
-                self._writer.register_schema(schema["title"], "jsonschema", schema_bytes(schema)),
-            )
-            for topic, schema in SCHEMAS.items()
-        }
+        try:
+            self._writer = Writer(self._fh, chunk_size=1 << 62, compression=CompressionType.ZSTD)
+            self._writer.start(library=f"a2cm_phys {__version__}")
+            meta = self._metadata(dict(metadata or {}), __version__)
+            self._writer.add_metadata(METADATA_NAME, meta)
+            self._channels = {
+                topic: self._writer.register_channel(
+                    topic,
+                    "json",
+                    self._writer.register_schema(
+                        schema["title"], "jsonschema", schema_bytes(schema)
+                    ),
+                )
+                for topic, schema in SCHEMAS.items()
+            }
+            self._durable()
+        except OSError as err:  # e.g. a full disk: leave no unreadable part behind
+            self._fh.close()
+            self.path.unlink(missing_ok=True)
+            raise self._named(err) from None
         self._scene_schema = 0
         self._scene_channels: dict[int, int] = {}
         self._vec: VectorEnv | None = None
@@ -168,7 +178,14 @@ class EpisodeRecorder:
         """Record one vector step: the pursuers' ``actions`` ``(B, N)`` (``(B, N, 2)``
         commands) as passed to ``vec_env.step`` and the :class:`VecStep` it returned, which
         holds the evader's actions, learned or scripted. (``episode_seeds_before`` is
-        accepted but not needed: each finished episode's summary carries its seed.)"""
+        accepted but not needed: each finished episode's summary carries its seed.) A failed
+        write raises an ``OSError`` naming the log's file."""
+        try:
+            self._record_step(actions, step)
+        except OSError as err:
+            raise self._named(err) from None
+
+    def _record_step(self, actions: np.ndarray, step: VecStep) -> None:
         if self._vec is None or self._closed:
             raise RuntimeError("EpisodeRecorder.record_step before start() or after close()")
         buf = self._buf
@@ -215,18 +232,28 @@ class EpisodeRecorder:
                 doc["steps_per_s"] = (self._steps - steps) * b / (now - then)
             self._rate_mark = (now, self._steps)
         doc.update(update=int(update), env_steps=self._steps * b, episodes=self._finished)
-        self._write(
-            self._channels[UPDATE_TOPIC],
-            self._steps * self._step_ns,
-            json.dumps(doc, separators=(",", ":")).encode(),
-        )
+        try:
+            self._write(
+                self._channels[UPDATE_TOPIC],
+                self._steps * self._step_ns,
+                json.dumps(doc, separators=(",", ":")).encode(),
+            )
+        except OSError as err:
+            raise self._named(err) from None
         if time.monotonic() >= self._deadline:
             self.flush()
 
-    def flush(self) -> None:
-        """Write the finished episodes and close the chunk, so a crash cannot lose them."""
-        self._encode_pending()
-        self._writer.flush()
+    def flush(self, durable: bool = False) -> None:
+        """Write the finished episodes and close the chunk, so that a killed process cannot
+        lose them; with ``durable``, also ``fsync`` the file, so that a crash of the machine
+        cannot either (the trainer does this before each checkpoint)."""
+        try:
+            self._encode_pending()
+            self._writer.flush()
+            if durable:
+                self._durable()
+        except OSError as err:
+            raise self._named(err) from None
         self._unflushed = 0
         self._deadline = time.monotonic() + self.flush_seconds
 
@@ -234,10 +261,35 @@ class EpisodeRecorder:
         """Write the remaining finished episodes, the MCAP summary and footer; idempotent."""
         if self._closed:
             return
-        self._encode_pending()
-        self._writer.finish()
+        try:
+            self._encode_pending()
+            self._writer.finish()
+            self._durable()
+        except OSError as err:
+            self.abandon()
+            raise self._named(err) from None
         self._fh.close()
         self._closed = True
+
+    def abandon(self) -> None:
+        """Close the file as it is, without writing anything more (after a failed write:
+        readers take every complete chunk before the failure)."""
+        if self._closed:
+            return
+        self._closed = True
+        with contextlib.suppress(OSError):  # what could not be written is lost; the rest stays
+            self._fh.close()
+
+    def _durable(self) -> None:
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+
+    def _named(self, err: OSError) -> OSError:
+        """``err`` with this log's file named (a failed ``write`` names none)."""
+        if err.filename is not None:
+            return err
+        reason = err.strerror or os.strerror(err.errno or errno.EIO)
+        return OSError(err.errno, reason, str(self.path))
 
     def __enter__(self) -> EpisodeRecorder:
         return self
