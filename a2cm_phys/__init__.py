@@ -7,17 +7,11 @@ The data path: ``config`` (scenario) → ``envs`` (game cores and APIs) → ``ro
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
-
 import gymnasium
 
 from .config import ConfigError, Scenario, load_scenario
 from .envs.parallel import PursuitParallelEnv, make_env
-
-try:
-    __version__ = version("a2cm_phys")
-except PackageNotFoundError:  # running from a source tree that is not installed
-    __version__ = "0.0.0+unknown"
+from .versions import __version__
 
 GYM_ID = "a2cm_phys/Pursuit-v0"
 """Gymnasium id of the joint view (kwarg ``scenario``)."""
@@ -25,4 +19,12 @@ GYM_ID = "a2cm_phys/Pursuit-v0"
 if GYM_ID not in gymnasium.registry:
     gymnasium.register(id=GYM_ID, entry_point="a2cm_phys.envs.gym:PursuitEnv")
 
-__all__ = ["GYM_ID", "ConfigError", "PursuitParallelEnv", "Scenario", "load_scenario", "make_env"]
+__all__ = [
+    "GYM_ID",
+    "ConfigError",
+    "PursuitParallelEnv",
+    "Scenario",
+    "__version__",
+    "load_scenario",
+    "make_env",
+]

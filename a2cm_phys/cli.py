@@ -22,16 +22,17 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from .config import ConfigError, Scenario, Train, load_scenario, load_train, parse_assignments
+from .config import Scenario, Train, load_scenario, load_train, parse_assignments
 from .config import preset as preset_values
+from .errors import UserError
 from .exitcodes import EXIT_INTERRUPTED, EXIT_NO_SPACE, EXIT_USAGE, OUT_OF_SPACE
-from .rundir import RunBusy, is_run_file
+from .rundir import is_run_file
 
 MAX_SEED = 2**64 - 1
 """Largest seed: seeds feed 64-bit generators."""
 
 
-class UsageError(Exception):
+class UsageError(UserError):
     """A command was given something it cannot use; the message names the option or file."""
 
 
@@ -51,7 +52,7 @@ def run_cli(body: Callable[[Sequence[str]], int], argv: Sequence[str] | None = N
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         return body(argv)
-    except (UsageError, ConfigError, RunBusy) as err:
+    except UserError as err:
         return fail(str(err))
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

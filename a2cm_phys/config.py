@@ -22,6 +22,8 @@ from typing import Any, Literal
 import numpy as np
 import tomllib
 
+from .errors import UserError
+
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 """Folder of the named scenarios, package data of ``a2cm_phys`` (so a wheel has them too);
 the checkout's top-level ``scenarios/`` is a symbolic link to it."""
@@ -41,7 +43,7 @@ DEFAULT_DT = {"discrete": 1.0, "continuous": 0.1}
 """The control period ``physics.dt`` (s) of each control type when a scenario omits it."""
 
 
-class ConfigError(ValueError):
+class ConfigError(UserError, ValueError):
     """A scenario or training setting is wrong; the message names the source and the key."""
 
 

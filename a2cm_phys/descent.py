@@ -41,6 +41,7 @@ import torch
 
 from .algos import ActorCritic
 from .config import ConfigError, Scenario, Train
+from .seeding import descent_rng, evader_descent_rng
 from .solve.model import TooLargeError, UnsupportedError
 from .solve.tables import joint_observations, model_table, uniform_table
 
@@ -115,7 +116,7 @@ class ExploitabilityDescent:
         self.scenario, self.model, self.steps = scenario, model, cfg.descent_steps
         self.gradient = WorstCaseGradient(scenario, cfg.gamma)
         self.optimizer = _actor_adam(model, cfg.descent_lr)
-        self.rng = np.random.default_rng([seed, 3])
+        self.rng = descent_rng(seed)
         self.last_value = float("nan")  # descent_value of the last step
         self.last_evader_value = float("nan")  # evader_descent_value of the last step
         self._obs = torch.from_numpy(joint_observations(scenario))
@@ -125,8 +126,7 @@ class ExploitabilityDescent:
         if self.evader is not None:
             self.evader_gradient = EvaderGradient(scenario, cfg.gamma, self.gradient)
             self.evader_optimizer = _actor_adam(self.evader, cfg.descent_lr)
-            # its own stream: the pursuers' descent is the same whether the evader's runs
-            self.evader_rng = np.random.default_rng([seed, 4])
+            self.evader_rng = evader_descent_rng(seed)
 
     def step(self) -> dict[str, float]:
         """One best response to each learning team and ``descent_steps`` actor steps each;

@@ -21,15 +21,12 @@ import json
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import checkpoint
-from .algos import ActorCritic, make_model
 from .cli import SEED, Parser, add_scenario_options, int_range, run_cli, scenario_from_args
-from .config import ConfigError, Scenario, build, load_train, stored_train
+from .config import ConfigError, Scenario
 from .envs.vector import VectorEnv
 from .policies import (
     EVADER_POLICIES,
@@ -41,20 +38,11 @@ from .policies import (
     random_policy,
 )
 from .rollout import Policy
+from .runs import load_trained_run
+from .seeding import policy_rng
 from .stats import describe
-from .teams import evader_train_cfg
-from .trainer import policy_rng
 
-__all__ = [
-    "EvalResult",
-    "TrainedRun",
-    "load_run",
-    "load_trained",
-    "main",
-    "model_policy",
-    "play",
-    "random_policy",
-]
+__all__ = ["EvalResult", "main", "play", "random_policy"]
 
 
 @dataclass
@@ -119,52 +107,6 @@ def play(
     )
 
 
-@dataclass(frozen=True)
-class TrainedRun:
-    """The scenario and trained models of a run: the pursuers', and a learned evader's."""
-
-    scenario: Scenario
-    pursuers: ActorCritic
-    evader: ActorCritic | None
-
-
-def load_run(path: str | Path) -> TrainedRun:
-    """The trained models of a run directory or checkpoint file (a :class:`ConfigError`
-    naming the path if it is not one)."""
-    try:
-        state = checkpoint.load(path)
-    except (OSError, ValueError) as err:
-        raise ConfigError(str(err)) from None
-    scenario = build(Scenario, state["scenario"], f"{path} (checkpoint)")
-    cfg = load_train({**stored_train(state["train"]), "device": "cpu"}, f"{path} (checkpoint)")
-    pursuers = make_model(cfg, scenario)
-    pursuers.load_state_dict(state["learner"]["model"])
-    evader = None
-    if state.get("evader_learner") is not None:
-        evader = make_model(evader_train_cfg(cfg), scenario, n_agents=1)
-        evader.load_state_dict(state["evader_learner"]["model"])
-    return TrainedRun(scenario, pursuers, evader)
-
-
-def load_trained(path: str | Path) -> tuple[Scenario, ActorCritic]:
-    """The scenario and trained pursuers of a run directory or checkpoint file."""
-    run = load_run(path)
-    return run.scenario, run.pursuers
-
-
-def load_trained_evader(path: str | Path) -> tuple[Scenario, ActorCritic]:
-    """The scenario and trained (learned) evader of a self-play run."""
-    run = load_run(path)
-    if run.evader is None:
-        raise ConfigError(f"{path}: the run has no learned evader")
-    return run.scenario, run.evader
-
-
-def model_policy(model: ActorCritic, greedy: bool = False) -> Policy:
-    """The actors of ``model`` as a rollout policy (sampled, or the most probable action)."""
-    return lambda obs, rng: model.act(obs, rng, greedy=greedy)
-
-
 # ---------------------------------------------------------------------- references
 
 
@@ -173,8 +115,8 @@ def optimum(scenario: Scenario) -> dict[str, float] | None:
     and return under the raw reward), or ``None`` where the oracle does not solve it."""
     if scenario.mode != "grid" or scenario.evader == "learned":
         return None
-    from .oracle import load_or_solve
     from .solve import TooLargeError, UnsupportedError
+    from .solve.cache import load_or_solve
 
     try:
         sol = load_or_solve(scenario)
@@ -328,7 +270,7 @@ def _scenario(args: argparse.Namespace, specs: Sequence[str | None]) -> Scenario
         return scenario_from_args(args, train=False)
     for spec in specs:  # the first run among the policies names the game
         if spec and spec not in (*PURSUER_POLICIES, *EVADER_POLICIES, *SOLVED_EVADERS):
-            return load_run(spec).scenario
+            return load_trained_run(spec).scenario
     raise ConfigError("named policies need --scenario (or a run directory)")
 
 

@@ -27,7 +27,8 @@ copies of the actors' weights (critics are not needed to act); they play through
 separate model per team, so the live models are never touched.
 
 The draws come from the pool's own generator, seeded from the run's seed
-(:func:`opponent_rng`, beside the trainer's :func:`~a2cm_phys.trainer.policy_rng`), and
+(:func:`~a2cm_phys.seeding.opponent_rng`, beside the actions'
+:func:`~a2cm_phys.seeding.policy_rng`), and
 :meth:`OpponentPool.state_dict` holds the snapshots and the generator, so ``--resume``
 stays bit for bit.
 
@@ -45,11 +46,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
-import numpy as np
 import torch
 
 from .algos import ActorCritic
 from .config import ConfigError, Scenario, Train
+from .seeding import opponent_rng
 
 Side = Literal["pursuers", "evader"]
 SIDES: tuple[Side, Side] = ("pursuers", "evader")
@@ -61,12 +62,6 @@ PairingKind = Literal["latest", "past_evader", "past_pursuers"]
 PAIRING_CODES: dict[str, int] = {"latest": 0, "past_evader": 1, "past_pursuers": 2}
 """The update metric ``pool_pairing`` of each pairing (``pool_snapshot_update`` is the
 update at which the past side's snapshot was taken, -1 when both are latest)."""
-
-
-def opponent_rng(seed: int) -> np.random.Generator:
-    """The generator of a run's opponent draws, independent of action sampling
-    (``[seed, 1]``) and of the evader's initial weights (``[seed, 2]``)."""
-    return np.random.default_rng([seed, 3])
 
 
 def check_pool(scenario: Scenario, cfg: Train) -> None:

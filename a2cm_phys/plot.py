@@ -32,7 +32,8 @@ import numpy as np
 
 from .cli import Parser, UsageError, int_range, run_cli, writable_dir
 from .config import Scenario
-from .record.reader import LogError, RunLog, read_run
+from .record.parts import read_run
+from .record.reader import LogError, RunLog
 
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#17becf")
 SERIES = (
@@ -79,7 +80,7 @@ def log_files(path: Path) -> list[Path]:
     return [path]
 
 
-def load_run(path: Path) -> Run:
+def load_logged_run(path: Path) -> Run:
     """Read a run (every part of a run folder's log, each episode once) or one log file.
 
     A :class:`LogError` if the log is damaged or holds no finished episode: a figure of
@@ -254,7 +255,7 @@ def _draw_game_values(ax: object, scenarios: list[Scenario]) -> None:
     """The game's value of each distinct game, a grey band between its bounds, where it
     is cached (``oracle --game-value``: minutes to solve, too long for a plot); a note
     otherwise."""
-    from .oracle import cached_value, value_cache_key
+    from .solve.cache import cached_value, value_cache_key
 
     seen: set[str] = set()
     for sc in scenarios:
@@ -489,7 +490,7 @@ def _main(argv: Sequence[str]) -> int:
         args.runs[0] if len(args.runs) == 1 and args.runs[0].is_dir() else Path("plots")
     )
     writable_dir(out, "--out")
-    runs = [load_run(path) for path in args.runs]
+    runs = [load_logged_run(path) for path in args.runs]
     for run, path in zip(runs, args.runs, strict=True):
         if not run.clean:
             print(f"note: {path}: a log was not closed cleanly; plotting what was recovered")
@@ -501,8 +502,8 @@ def _main(argv: Sequence[str]) -> int:
 def _main_mean(args: object, groups: list[tuple[str, list[Path]]]) -> int:
     out = args.out or Path("plots")
     writable_dir(out, "--out")
-    labelled = [(label, load_run(p)) for label, paths in groups for p in paths]
-    labelled += [(run.label, run) for run in (load_run(p) for p in args.runs)]
+    labelled = [(label, load_logged_run(p)) for label, paths in groups for p in paths]
+    labelled += [(run.label, run) for run in (load_logged_run(p) for p in args.runs)]
     references: dict[str, Reference | None] = {}
     for _, run in labelled:
         sc = run.scenario

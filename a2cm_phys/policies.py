@@ -35,9 +35,10 @@ from typing import Any
 import numpy as np
 
 from .baselines import pursuit_actions
-from .config import ConfigError, Physics, Scenario
+from .config import ConfigError, Physics, Scenario, load_scenario
 from .envs.core import ACTION_DELTAS
 from .rollout import Policy
+from .solve.cache import OracleSolution, load_or_solve
 
 PURSUER_POLICIES = ("random", "pursuit", "oracle", "minimax")
 """The names :func:`pursuer_policy` knows."""
@@ -81,12 +82,42 @@ def grid_twin(scenario: Scenario) -> Scenario:
     )
 
 
+class OraclePolicy:
+    """The optimal joint policy of a grid scenario, acting on global observations.
+
+    ``scenario`` is a :class:`Scenario` or a scenario name/path; the solution is loaded from
+    the cache or solved on construction (see :func:`load_or_solve`).
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario | str | Path,
+        cache_dir: str | Path | None = None,
+        solution: OracleSolution | None = None,
+    ) -> None:
+        self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        self.solution = solution or load_or_solve(self.scenario, cache_dir)
+
+    def positions(self, obs: np.ndarray) -> np.ndarray:
+        """Integer cells ``(B, N + 1, 2)`` decoded from observations ``(B, obs_dim)``."""
+        obs = np.asarray(obs, dtype=np.float64)
+        n, size = self.scenario.pursuers, self.scenario.size
+        return np.rint(obs.reshape(len(obs), n + 1, 2) * (size - 1)).astype(np.int64)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Optimal actions ``(B, N)`` int64 for observations ``(B, obs_dim)`` float32."""
+        return self.solution.actions(self.positions(obs))
+
+    def expected_capture_steps(self, positions: np.ndarray) -> float | np.ndarray:
+        """See :meth:`OracleSolution.expected_capture_steps`."""
+        return self.solution.expected_capture_steps(positions)
+
+
 def oracle_policy(scenario: Scenario) -> Policy:
     """The exact optimum of the (grid twin of the) scenario; see the module docstring.
 
     Raises :class:`~a2cm_phys.config.ConfigError` when the oracle cannot solve it.
     """
-    from .oracle import OraclePolicy
     from .solve import TooLargeError, UnsupportedError
 
     try:
@@ -112,8 +143,8 @@ def minimax_policy(scenario: Scenario) -> Policy:
     :class:`~a2cm_phys.config.ConfigError` outside grid mode or where it cannot be solved.
     """
     from .solve import TooLargeError, UnsupportedError
-    from .solve.sources import pursuer_source
     from .solve.tables import TablePolicy
+    from .sources import pursuer_source
 
     if scenario.mode != "grid":
         raise ConfigError("minimax policy: the minimax team is solved on grids only")
@@ -170,9 +201,11 @@ def matchup(
     ``None``: the scenario's own evader, or the pursuers' run's evader when it is learned)
     in ``scenario``. Trained policies act greedily when ``greedy``.
     """
-    from .evaluate import load_run, model_policy
+    from .runs import load_trained_run, model_policy
 
-    pursuer_run = None if pursuers in PURSUER_POLICIES else _run(load_run, "--pursuers", pursuers)
+    pursuer_run = (
+        None if pursuers in PURSUER_POLICIES else _run(load_trained_run, "--pursuers", pursuers)
+    )
     if pursuer_run is not None:
         check_layout(pursuer_run.scenario, scenario, pursuers, pursuer_run.pursuers)
     evader_model, evader_name = None, evader or scenario.evader
@@ -181,7 +214,7 @@ def matchup(
     elif evader == EQUILIBRIUM:
         evader_model, evader_name = equilibrium_evader(scenario), "learned"
     elif evader is not None and evader not in EVADER_POLICIES:
-        run = _run(load_run, "--evader", evader)
+        run = _run(load_trained_run, "--evader", evader)
         if run.evader is None:
             raise ConfigError(f"--evader {evader}: the run has no learned evader")
         check_layout(run.scenario, scenario, evader, run.evader)
@@ -244,8 +277,8 @@ def best_response_evader(scenario: Scenario, pursuers: str):
     ``oracle`` or ``minimax``), as a table policy with the actors' interface (grids only)."""
     from .solve import TooLargeError, UnsupportedError
     from .solve.best_response import evader_best_response
-    from .solve.sources import SourceError, pursuer_source
     from .solve.tables import TablePolicy
+    from .sources import SourceError, pursuer_source
 
     if scenario.mode != "grid":
         raise ConfigError("--evader best-response: exact best responses exist on grids only")
@@ -259,11 +292,11 @@ def best_response_evader(scenario: Scenario, pursuers: str):
 
 
 def equilibrium_evader(scenario: Scenario):
-    """The game's equilibrium evader (:func:`~a2cm_phys.oracle.load_or_solve_value`: cached
+    """The game's equilibrium evader (:func:`~a2cm_phys.solve.cache.load_or_solve_value`: cached
     beside the oracle, or solved in minutes), as a table policy with the actors' interface
     (grids only)."""
-    from .oracle import load_or_solve_value
     from .solve import TooLargeError, UnsupportedError
+    from .solve.cache import load_or_solve_value
     from .solve.tables import TablePolicy
 
     if scenario.mode != "grid":

@@ -27,7 +27,8 @@ from .cli import Parser, UsageError, int_range, output_file, positive_float, run
 from .config import Scenario
 from .envs.core import ACTION_NAMES
 from .record.integrity import check_run_log
-from .record.reader import RunLog, Trajectory, read_run
+from .record.parts import read_run
+from .record.reader import RunLog, Trajectory
 from .record.schemas import step_seconds
 from .record.verify import verify, verify_trajectory
 from .rundir import SUMMARY_NAME
@@ -174,7 +175,7 @@ def action_text(action: np.ndarray) -> str:
 
 def episode_text(scenario: Scenario, traj: Trajectory) -> str:
     """Every state of an episode as a text board, with the actions that led to it."""
-    from .render import render_text
+    from .envs.render import render_text
 
     n = scenario.pursuers
     evader_return = (
@@ -206,7 +207,7 @@ def episode_frames(scenario: Scenario, traj: Trajectory, max_frames: int) -> lis
     """RGB frames of (at most ``max_frames`` evenly spaced) states of an episode. Physics
     episodes show each agent's path so far as a trail: every state up to the frame's, also
     the ones between frames, so a continuous path is drawn whole however few frames."""
-    from .render import render_rgb
+    from .envs.render import render_rgb
 
     states = np.unique(np.linspace(0, traj.length, min(max_frames, traj.length + 1)).round())
     trails = scenario.mode == "physics"

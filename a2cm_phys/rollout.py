@@ -14,8 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .config import Scenario
-from .envs.core import StepOutcome
+from .envs.core import REWARD_PARTS, reward_parts
 from .envs.vector import EpisodeSummary, VecStep, VectorEnv
 
 Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
@@ -23,22 +22,6 @@ Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
 
 StepHook = Callable[[np.ndarray, VecStep], None]
 """``hook(actions, step)``, called after every vector step (e.g. the episode recorder)."""
-
-REWARD_PARTS = ("time", "collision")
-"""The team reward's components (SPEC §4): ``time`` is the step reward with the capture and
-wall terms, ``collision`` the collision penalty (zero in ``off`` mode)."""
-
-
-def reward_parts(scenario: Scenario, outcome: StepOutcome, out: np.ndarray) -> None:
-    """Write the step's reward split into :data:`REWARD_PARTS` into ``out (B, 2)``.
-
-    The parts sum to the team reward (the collision part is exact; the time part is the
-    rest, so the sum equals ``outcome.reward`` up to float rounding of the subtraction).
-    """
-    weight = scenario.rewards.collision if scenario.collisions.mode != "off" else 0.0
-    np.multiply(outcome.collisions, weight, out=out[:, 1])
-    np.subtract(outcome.reward, out[:, 1], out=out[:, 0])
-
 
 def allocate_batch(
     steps: int,

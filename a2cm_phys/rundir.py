@@ -22,6 +22,8 @@ import re
 from collections.abc import Iterator
 from pathlib import Path
 
+from .errors import UserError
+
 CONFIG_NAME = "config.json"
 """The resolved scenario and training config, the commands and library versions."""
 
@@ -60,7 +62,7 @@ def _drop_inherited_locks() -> None:
 os.register_at_fork(after_in_child=_drop_inherited_locks)
 
 
-class RunBusy(Exception):
+class RunBusy(UserError):
     """Another process writes this run (it holds the run's lock); the message names it."""
 
 

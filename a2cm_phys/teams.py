@@ -13,12 +13,12 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from .algos import ActorCritic, Learner, make_model
 from .algos.shaping import ProgressShaping
 from .config import Scenario, Train, resolve_train
 from .rollout import allocate_batch, allocate_evader_batch
+from .seeding import evader_weights_generator
 
 
 @dataclass
@@ -39,12 +39,6 @@ def evader_train_cfg(cfg: Train) -> Train:
     )
 
 
-def _evader_generator(seed: int) -> torch.Generator:
-    """A torch generator for the evader's initial weights, independent of the pursuers'."""
-    state = np.random.SeedSequence([seed, 2]).generate_state(1, np.uint64)[0]
-    return torch.Generator().manual_seed(int(state))
-
-
 def make_teams(scenario: Scenario, cfg: Train) -> tuple[Team, Team | None]:
     """The pursuers' team and, if the scenario's evader is learned, the evader's."""
     cfg = resolve_train(scenario, cfg)
@@ -61,7 +55,7 @@ def make_teams(scenario: Scenario, cfg: Train) -> tuple[Team, Team | None]:
     if scenario.evader != "learned":
         return pursuers, None
     ecfg = evader_train_cfg(cfg)
-    emodel = make_model(ecfg, scenario, _evader_generator(cfg.seed), n_agents=1)
+    emodel = make_model(ecfg, scenario, evader_weights_generator(cfg.seed), n_agents=1)
     ebatch = allocate_evader_batch(batch, emodel.dist.action_shape, emodel.dist.action_dtype)
     learner = Learner(emodel, ecfg, _shaping(scenario, ecfg, sign=-1.0))
     return pursuers, Team("evader", emodel, learner, ebatch)

@@ -63,7 +63,9 @@ from .rundir import (
 from .rundir import (
     PREVIOUS_CHECKPOINT_NAME as PREVIOUS_NAME,
 )
-from .trainer import Trainer, check_run, policy_rng
+from .seeding import policy_rng
+from .trainer import Trainer, check_run
+from .versions import library_versions
 
 __all__ = [
     "EXIT_INTERRUPTED",
@@ -249,24 +251,6 @@ def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Traine
         if not existed:
             shutil.rmtree(run_dir, ignore_errors=True)
         raise
-
-
-VERSIONED = ("a2cm_phys", "numpy", "torch", "pymunk", "scipy")
-"""The packages whose versions a run records: a rebuilt environment can change a run's
-floats (the same seed's long runs then differ), and the record says which one ran."""
-
-
-def library_versions() -> dict[str, str]:
-    """Python's version and those of :data:`VERSIONED` (``"absent"`` if not installed)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    versions = {"python": sys.version.split()[0]}
-    for name in VERSIONED:
-        try:
-            versions[name] = version(name)
-        except PackageNotFoundError:
-            versions[name] = "absent"
-    return versions
 
 
 def write_config(run_dir: Path, scenario: Scenario, cfg: Train, command: str) -> None:

@@ -25,7 +25,6 @@ from contextlib import contextmanager, nullcontext
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 from threadpoolctl import threadpool_limits
 from tqdm import tqdm
@@ -49,6 +48,7 @@ from .exploitability import exploitability, solvable
 from .opponents import LATEST, PAIRING_CODES, OpponentPool, Pairing, check_pool
 from .rollout import StepHook, collect
 from .rundir import CONFIG_NAME, SUMMARY_NAME, write_atomic
+from .seeding import policy_rng
 from .stats import EpisodeStats
 from .teams import make_teams
 
@@ -78,11 +78,6 @@ def check_run(scenario: Scenario, cfg: Train) -> None:
     check_workers(scenario, cfg)
     check_pool(scenario, cfg)
     check_descent(scenario, cfg)
-
-
-def policy_rng(seed: int) -> np.random.Generator:
-    """The action-sampling generator of a run, independent of the env's seed stream."""
-    return np.random.default_rng([seed, 1])
 
 
 class Trainer:

@@ -110,7 +110,8 @@ def run(scenario: str, algo: str, variant: str, seed: int, steps: int, episodes:
     import torch
 
     from a2cm_phys.config import load_scenario, load_train, resolve_train
-    from a2cm_phys.evaluate import model_policy, play
+    from a2cm_phys.evaluate import play
+    from a2cm_phys.runs import model_policy
     from a2cm_phys.train import Trainer
 
     torch.set_num_threads(1)

@@ -37,13 +37,13 @@ from pathlib import Path
 import numpy as np
 
 from a2cm_phys.config import Scenario, load_scenario
-from a2cm_phys.evaluate import load_run
-from a2cm_phys.oracle import load_or_solve
+from a2cm_phys.runs import load_trained_run
 from a2cm_phys.solve.best_response import (
     evader_best_response,
     evaluate_tables,
     pursuers_best_response,
 )
+from a2cm_phys.solve.cache import load_or_solve
 from a2cm_phys.solve.tables import (
     joint_policy_table,
     model_table,
@@ -75,7 +75,7 @@ def train(seed: int, run_dir: Path, assignments: list[str]) -> float:
 
 def measure(run_dir: Path, oracle_table: np.ndarray, game: Scenario) -> dict[str, float]:
     """The exact figures of one run's final actors in ``game`` (the solvers' rules)."""
-    run = load_run(run_dir)
+    run = load_trained_run(run_dir)
     pursuers = model_table(game, run.pursuers, game.pursuers)
     evader = model_table(game, run.evader, 1)
     worst = evader_best_response(game, pursuers)

@@ -24,9 +24,9 @@ from pathlib import Path
 import torch
 
 from a2cm_phys.config import load_scenario
-from a2cm_phys.evaluate import load_run
-from a2cm_phys.oracle import load_or_solve
+from a2cm_phys.runs import load_trained_run
 from a2cm_phys.solve.best_response import evader_best_response, evaluate_tables
+from a2cm_phys.solve.cache import load_or_solve
 from a2cm_phys.solve.minimax import minimax_bounds
 from a2cm_phys.solve.nash import evader_worst_case, game_value
 from a2cm_phys.solve.tables import (
@@ -59,7 +59,7 @@ def main() -> None:
         "random": uniform_table(game, 1),
     }
     for run in args.runs:
-        evaders[f"learned {run}"] = model_table(game, load_run(run).evader, 1)
+        evaders[f"learned {run}"] = model_table(game, load_trained_run(run).evader, 1)
     print("| evader | worst case (its best response) | share of the value | vs the oracle's team |")
     print("|---|---|---|---|")
     for name, table in evaders.items():
@@ -71,7 +71,7 @@ def main() -> None:
         "minimax": joint_policy_table(game, minimax_bounds(game).policy),
     }
     for run in args.runs:
-        teams[f"learned {run}"] = model_table(game, load_run(run).pursuers, game.pursuers)
+        teams[f"learned {run}"] = model_table(game, load_trained_run(run).pursuers, game.pursuers)
     print(f"| team | worst case |\n|---|---|\n| equilibrium (correlated) | {value.upper:.3f} |")
     for name, table in teams.items():
         print(f"| {name} | {evader_best_response(game, table).value_from_start:.3f} |")

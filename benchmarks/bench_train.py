@@ -20,7 +20,8 @@ import tempfile
 import time
 
 from a2cm_phys.config import load_scenario, load_train
-from a2cm_phys.evaluate import model_policy, play
+from a2cm_phys.evaluate import play
+from a2cm_phys.runs import model_policy
 from a2cm_phys.train import Trainer
 
 

@@ -19,10 +19,10 @@ import argparse
 
 import numpy as np
 
-from a2cm_phys.oracle import load_or_solve
+from a2cm_phys.solve.cache import load_or_solve
 from a2cm_phys.solve.evaluate import evaluate_policy, policy_chain, state_visits
-from a2cm_phys.solve.sources import load_run
 from a2cm_phys.solve.tables import model_table, start_state
+from a2cm_phys.sources import load_pursuer_run
 
 
 def main() -> None:
@@ -31,7 +31,7 @@ def main() -> None:
     p.add_argument("run", help="a run directory of a grid scenario with a scripted evader")
     p.add_argument("--top", type=int, default=12, help="states to list")
     args = p.parse_args()
-    scenario, model = load_run(args.run)
+    scenario, model = load_pursuer_run(args.run)
     solution = load_or_solve(scenario)
     grid = solution.model
     table = model_table(scenario, model, scenario.pursuers)  # (S, N, A)

@@ -16,13 +16,14 @@ import pytest
 
 from a2cm_phys.config import Scenario, load_scenario
 from a2cm_phys.envs.grid import GridCore
-from a2cm_phys.oracle import load_or_solve, main
+from a2cm_phys.oracle import main
 from a2cm_phys.solve import GridModel, TooLargeError, solve_dp
 from a2cm_phys.solve.best_response import (
     evader_best_response,
     evaluate_tables,
     pursuers_best_response,
 )
+from a2cm_phys.solve.cache import load_or_solve
 from a2cm_phys.solve.pursuer_step import PursuerStep
 from a2cm_phys.solve.tables import (
     TablePolicy,
@@ -429,7 +430,7 @@ def test_cli_with_a_trained_run(tmp_path: Path, capsys: pytest.CaptureFixture[st
     """A run's actors (general table) against the evader's best response; the scenario is
     the run's own when ``--scenario`` is not given."""
     from a2cm_phys.config import load_train
-    from a2cm_phys.evaluate import load_trained
+    from a2cm_phys.runs import load_trained
     from a2cm_phys.train import Trainer
 
     sc = grid(size=3, pursuers=2, max_steps=30)

@@ -13,9 +13,9 @@ from a2cm_phys.baselines import pursuit_actions
 from a2cm_phys.config import ConfigError, load_scenario, scenario_names
 from a2cm_phys.envs.contacts import PURSUER_EVADER, PURSUER_PURSUER
 from a2cm_phys.envs.physics import PhysicsCore
+from a2cm_phys.envs.render import render_rgb
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.envs.workers import ProcessCore
-from a2cm_phys.render import render_rgb
 
 CONT = [  # scripted evaders (tests/test_learned_evader.py has the learned one)
     name

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from a2cm_phys.config import load_scenario
-from a2cm_phys.envs.evader import Evader, evader_actions, flee_actions, random_actions
-from a2cm_phys.envs.evader_continuous import FLEE_SPEED, RANDOM_SPEED, ContinuousEvader
+from a2cm_phys.envs.evaders.continuous import FLEE_SPEED, RANDOM_SPEED, ContinuousEvader
+from a2cm_phys.envs.evaders.scripted import Evader, evader_actions, flee_actions, random_actions
 
 
 def test_random_evader_is_uniform_and_reproducible():

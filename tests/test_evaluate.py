@@ -122,8 +122,7 @@ def test_the_oracle_is_one_team_whatever_evader_it_meets(tmp_path) -> None:
     evader) in every column, not each column's best response (which differs)."""
     import dataclasses
 
-    from a2cm_phys.oracle import OraclePolicy
-    from a2cm_phys.policies import matchup
+    from a2cm_phys.policies import OraclePolicy, matchup
     from a2cm_phys.solve.tables import joint_observations, valid_states
 
     sc = load_scenario("grid", {"size": 3, "pursuers": 2, "max_steps": 50})

@@ -10,7 +10,8 @@ from test_grid_rules import CASES, DOWN, LEFT, RIGHT, STAY, UP
 from a2cm_phys import make_env
 from a2cm_phys.config import load_scenario
 from a2cm_phys.envs.core import evader_reward
-from a2cm_phys.envs.factory import make_core, make_evader
+from a2cm_phys.envs.evaders import make_evader
+from a2cm_phys.envs.factory import make_core
 from a2cm_phys.envs.grid import GridCore
 from a2cm_phys.envs.physics import PhysicsCore
 from a2cm_phys.envs.vector import VectorEnv

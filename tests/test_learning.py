@@ -6,7 +6,8 @@ import math
 from pathlib import Path
 
 from a2cm_phys.config import load_scenario, load_train
-from a2cm_phys.evaluate import model_policy, play, random_policy
+from a2cm_phys.evaluate import play, random_policy
+from a2cm_phys.runs import model_policy
 from a2cm_phys.stats import mean_and_se
 from a2cm_phys.train import Trainer
 

@@ -16,12 +16,13 @@ from scipy.optimize import linprog
 from test_best_response import SMALL, Brute, grid
 
 from a2cm_phys.config import Rewards, Scenario
-from a2cm_phys.oracle import cached_value, load_or_solve, load_or_solve_value, main
+from a2cm_phys.oracle import main
 from a2cm_phys.solve.best_response import (
     evader_best_response,
     evaluate_tables,
     pursuers_best_response,
 )
+from a2cm_phys.solve.cache import cached_value, load_or_solve, load_or_solve_value
 from a2cm_phys.solve.minimax import minimax_bounds
 from a2cm_phys.solve.nash import TOLERANCE, evader_worst_case, game_value, team_worst_case
 from a2cm_phys.solve.tables import (

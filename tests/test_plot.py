@@ -10,7 +10,7 @@ from PIL import Image
 from test_record import make_log
 from test_replay import damage_a_chunk
 
-from a2cm_phys.plot import load_run, log_files, main, moving_average
+from a2cm_phys.plot import load_logged_run, log_files, main, moving_average
 from a2cm_phys.record import read_run
 from a2cm_phys.record.parts import new_part
 
@@ -38,7 +38,7 @@ def test_plot_writes_png_figures_for_overlaid_runs(
         with Image.open(out / name) as im:
             assert im.size[0] > 500 and im.size[1] > 300
             assert len(np.unique(np.asarray(im.convert("L")))) > 10  # something was drawn
-    assert load_run(tmp_path / "a2c").label == "A2C"
+    assert load_logged_run(tmp_path / "a2c").label == "A2C"
     assert "wrote" in capsys.readouterr().out
 
 
@@ -110,12 +110,12 @@ def test_exploitability_is_drawn_from_sparse_update_metrics(tmp_path: Path) -> N
     updates = read_run(tmp_path / "sp").updates
     assert [u["update"] for u in updates if "exploit_worst_case" in u] == [0, 5, 10, 15]
     assert updates[10]["exploit_pursuers_br"] is None
-    run = load_run(tmp_path / "sp")
+    run = load_logged_run(tmp_path / "sp")
     steps, values = run.exploit["exploit_worst_case"]
     assert steps.tolist() == [(u + 1) * 8 * 4 for u in (0, 5, 10, 15)]  # env steps, 4 games
     assert values.tolist() == [9.5, 8.25, 7.0, 5.75]
     assert run.exploit["exploit_pursuers_br"][1].tolist() == [2.5, 3.0, 4.0]
-    assert load_run(tmp_path / "plain").exploit == {}
+    assert load_logged_run(tmp_path / "plain").exploit == {}
 
     out = tmp_path / "figs"
     assert main([str(tmp_path / "sp"), str(tmp_path / "plain"), "--out", str(out)]) == 0
@@ -135,7 +135,7 @@ def test_runs_grouped_by_label_are_plotted_as_seeds_against_env_steps(tmp_path: 
         for seed in (0, 1):
             make_log(tmp_path / f"{algo}{seed}" / "episodes.mcap", steps=120, seed=seed,
                      algo=algo, label=None, log_every=0)  # fmt: skip
-    run = load_run(tmp_path / "a2c0")
+    run = load_logged_run(tmp_path / "a2c0")
     steps, lengths, games = run.columns["env_steps"], run.columns["length"], 4
     assert steps.max() <= 120 * games and np.all(steps % games == 0)
     assert steps[0] == lengths[0] * games  # the first episode to end, in its game
@@ -167,8 +167,8 @@ def test_exploitability_figure_shows_the_cached_game_value(
     from matplotlib.figure import Figure
 
     from a2cm_phys.config import load_scenario
-    from a2cm_phys.oracle import cached_value, load_or_solve_value
     from a2cm_phys.plot import _draw_game_values
+    from a2cm_phys.solve.cache import cached_value, load_or_solve_value
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     small = {"size": 3, "pursuers": 2, "max_steps": 50}
@@ -180,7 +180,7 @@ def test_exploitability_figure_shows_the_cached_game_value(
     assert main([str(tmp_path / "sp"), "--out", str(tmp_path / "before")]) == 0
     assert "--scenario grid_vs --game-value` solves it" in capsys.readouterr().out
 
-    sc = load_run(tmp_path / "sp").scenario
+    sc = load_logged_run(tmp_path / "sp").scenario
     value = load_or_solve_value(load_scenario("grid_vs", small))  # what the command caches
     assert not value.cached and cached_value(sc).cached
     assert main([str(tmp_path / "sp"), "--out", str(tmp_path / "after")]) == 0

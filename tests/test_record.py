@@ -29,8 +29,8 @@ from a2cm_phys.record.schemas import (
     UPDATE_TOPIC,
 )
 
-FOXGLOVE_SCENE = Path(__file__).resolve().parents[2] / "shared/foxglove-schemas/SceneUpdate.json"
-"""Foxglove's own schema (``shared/`` lies beside the repository)."""
+FOXGLOVE_SCENE = Path(__file__).resolve().parent / "data/foxglove/SceneUpdate.json"
+"""Foxglove's own schema, vendored with its MIT licence (see ``data/foxglove/README.md``)."""
 
 
 def validator(schema: dict) -> jsonschema.Validator:

@@ -143,7 +143,7 @@ def drift(sc: Scenario, rng: np.random.Generator, envs: int) -> tuple[np.ndarray
 
 
 def test_gif_frames_draw_the_paths_as_trails(tmp_path: Path) -> None:
-    from a2cm_phys.render import render_rgb
+    from a2cm_phys.envs.render import render_rgb
 
     make_log(tmp_path / "episodes.mcap", "phys_cont", envs=1, steps=45, overrides=SHORT,
              policy=drift)  # fmt: skip

@@ -14,9 +14,10 @@ from a2cm_phys import checkpoint
 from a2cm_phys.config import load_scenario, load_train
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.rollout import collect
+from a2cm_phys.seeding import policy_rng
 from a2cm_phys.teams import make_teams
 from a2cm_phys.train import main
-from a2cm_phys.trainer import Trainer, policy_rng
+from a2cm_phys.trainer import Trainer
 
 VS = ("--scenario", "grid_vs", "--num-envs", "4", "--batch-size", "32", "--seed", "5")
 CONSTANT_LR = ("--set", "train.lr_schedule=constant")  # an extended run: the same schedule

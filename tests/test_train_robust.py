@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from a2cm_phys import checkpoint
-from a2cm_phys.plot import load_run
+from a2cm_phys.plot import load_logged_run
 from a2cm_phys.record import read_run
 from a2cm_phys.record.writer import EpisodeRecorder
 from a2cm_phys.replay import main as replay_main
@@ -68,7 +68,7 @@ def test_a_log_ahead_of_its_checkpoint_counts_each_episode_once(tmp_path, capsys
     n = _episodes(whole)
     assert _episodes(run_dir) == n
     assert _ids(run_dir) == list(range(n))
-    assert len(load_run(run_dir).columns["length"]) == n
+    assert len(load_logged_run(run_dir).columns["length"]) == n
     capsys.readouterr()
     assert replay_main([str(run_dir)]) == 0
     out = capsys.readouterr().out

@@ -43,6 +43,7 @@ from a2cm_phys.algos.distributions import (
     GaussianActions,
     sample_categorical,
 )
+from a2cm_phys.envs.core import REWARD_PARTS
 
 if TYPE_CHECKING:
     from a2cm_phys.config import Scenario, Train
@@ -361,10 +362,9 @@ def make_model(
     team of one, such as a learned evader, passes its own). The initial weights come from
     ``generator`` if given, otherwise from a torch generator seeded with ``train_cfg.seed``
     (independent of the global torch RNG). With ``split_rewards`` each critic predicts one
-    value per reward component (:data:`~a2cm_phys.rollout.REWARD_PARTS`).
+    value per reward component (:data:`~a2cm_phys.envs.core.REWARD_PARTS`).
     """
     from a2cm_phys.config import resolve_train
-    from a2cm_phys.rollout import REWARD_PARTS
 
     if generator is None:
         generator = torch.Generator().manual_seed(train_cfg.seed)

@@ -12,7 +12,7 @@ it was played in.
 
 The evader is a policy injected into the core (:class:`EvaderPolicy`): each step the core
 asks it for every game's command and plays it by the mode's rules, written once. A learned
-evader (SPEC §1b) is the policy :class:`~.evader_learned.LearnedEvader`, which plays the
+evader (SPEC §1b) is the policy :class:`~.evaders.learned.LearnedEvader`, which plays the
 actions given with the step: ``step(actions, evader_actions)``. Pursuer actions are
 ``(B, N)`` integer moves, or with continuous control (SPEC §3b) ``(B, N, 2)`` float velocity
 commands as fractions of ``max_speed``, which the core clips to the unit disc; the
@@ -122,7 +122,7 @@ def settle(
 
 class EvaderPolicy(Protocol):
     """The evader of a batch of games, as a core plays it (scripted: :mod:`.evader`,
-    :mod:`.evader_continuous`). A core owns the seed and step arrays it passes in; it calls
+    :mod:`.evaders.continuous`). A core owns the seed and step arrays it passes in; it calls
     :meth:`restart` for the games it resets and :meth:`forget` when it changes those arrays
     in any other way (loading a state). ``needs_positions`` says whether :meth:`moves`
     reads the positions (a core may pass ``None`` otherwise). A policy with a method
@@ -311,3 +311,19 @@ def check_actions(actions: np.ndarray, n_actions: int, names: Sequence[str]) -> 
             f"invalid action {int(actions[env, agent])} for {names[agent]}{where}:"
             f" expected an integer in [0, {n_actions})"
         )
+
+
+REWARD_PARTS = ("time", "collision")
+"""The team reward's components (SPEC §4): ``time`` is the step reward with the capture and
+wall terms, ``collision`` the collision penalty (zero in ``off`` mode)."""
+
+
+def reward_parts(scenario: Scenario, outcome: StepOutcome, out: np.ndarray) -> None:
+    """Write the step's reward split into :data:`REWARD_PARTS` into ``out (B, 2)``.
+
+    The parts sum to the team reward (the collision part is exact; the time part is the
+    rest, so the sum equals ``outcome.reward`` up to float rounding of the subtraction).
+    """
+    weight = scenario.rewards.collision if scenario.collisions.mode != "off" else 0.0
+    np.multiply(outcome.collisions, weight, out=out[:, 1])
+    np.subtract(outcome.reward, out[:, 1], out=out[:, 0])

@@ -1,9 +1,10 @@
-"""Choose the simulation core for a scenario's mode, and the evader policy it plays."""
+"""Choose the simulation core for a scenario's mode (each core builds the evader it plays
+with :func:`a2cm_phys.envs.evaders.make_evader`)."""
 
 from __future__ import annotations
 
 from ..config import Scenario
-from .core import Core, EvaderPolicy
+from .core import Core
 
 
 def make_core(scenario: Scenario, num_envs: int, workers: int = 1) -> Core:
@@ -20,22 +21,3 @@ def make_core(scenario: Scenario, num_envs: int, workers: int = 1) -> Core:
     from .physics import PhysicsCore
 
     return PhysicsCore(scenario, num_envs)
-
-
-def make_evader(scenario: Scenario, num_envs: int, low: float, high: float) -> EvaderPolicy:
-    """The scenario's evader for ``num_envs`` games whose evader centre stays in
-    ``[low, high]²``: scripted discrete moves (:class:`~.evader.Evader`) or, with continuous
-    control, velocity commands (:class:`~.evader_continuous.ContinuousEvader`); with
-    ``evader = "learned"`` the agent's actions, given with each step
-    (:class:`~.evader_learned.LearnedEvader`)."""
-    if scenario.evader == "learned":
-        from .evader_learned import LearnedEvader
-
-        return LearnedEvader(scenario, num_envs)
-    if scenario.continuous:
-        from .evader_continuous import ContinuousEvader
-
-        return ContinuousEvader(scenario, num_envs, low, high)
-    from .evader import Evader
-
-    return Evader(scenario, num_envs, low, high)

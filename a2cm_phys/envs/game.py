@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 
 from ..config import Scenario
-from ..render import render_rgb, render_text
 from .core import Core, StepOutcome, action_shape, check_actions, check_commands
 from .factory import make_core
+from .render import render_rgb, render_text
 
 
 class Game:

@@ -22,8 +22,8 @@ from .core import (
     parse_positions,
     settle,
 )
-from .evader_learned import refuse_evader_actions
-from .factory import make_evader
+from .evaders import make_evader
+from .evaders.learned import refuse_evader_actions
 
 
 def meet(old_a: np.ndarray, new_a: np.ndarray, old_b: np.ndarray, new_b: np.ndarray) -> np.ndarray:
@@ -100,7 +100,7 @@ class GridCore:
     """``num_envs`` independent grid games of one scenario (implements ``core.Core``).
 
     ``evader`` is the evader's policy (default: the scenario's, see
-    :func:`~.factory.make_evader`; with ``evader = "learned"`` its actions come with each
+    :func:`~.evaders.make_evader`; with ``evader = "learned"`` its actions come with each
     :meth:`step`)."""
 
     def __init__(

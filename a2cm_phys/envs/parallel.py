@@ -17,7 +17,7 @@ from gymnasium import spaces
 
 from ..config import Scenario, load_scenario
 from .core import evader_reward
-from .evader_learned import EVADER
+from .evaders.learned import EVADER
 from .game import Game
 
 

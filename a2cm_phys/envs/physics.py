@@ -59,8 +59,8 @@ from .core import (
     parse_positions,
     settle,
 )
-from .evader_learned import refuse_evader_actions
-from .factory import make_evader
+from .evaders import make_evader
+from .evaders.learned import refuse_evader_actions
 
 
 class CollisionType(IntEnum):
@@ -492,7 +492,7 @@ class PhysicsCore(StateViews):
     """``num_envs`` independent physics games of one scenario (implements ``core.Core``).
 
     ``evader`` is the evader's policy (default: the scenario's, see
-    :func:`~.factory.make_evader`; with ``evader = "learned"`` its actions come with each
+    :func:`~.evaders.make_evader`; with ``evader = "learned"`` its actions come with each
     :meth:`step`)."""
 
     def __init__(

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..config import Scenario
 from .core import StepOutcome, action_shape, check_joint_actions, evader_reward
-from .evader_learned import evader_action_shape
+from .evaders.learned import evader_action_shape
 from .factory import make_core
 
 

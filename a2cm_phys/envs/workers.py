@@ -45,7 +45,7 @@ import numpy as np
 
 from ..config import Scenario
 from .core import StepOutcome
-from .evader_learned import refuse_evader_actions, take_evader_actions
+from .evaders.learned import refuse_evader_actions, take_evader_actions
 from .physics import PhysicsCore, StateViews, placed_positions, start_positions
 
 _GC_THRESHOLD = 10_000

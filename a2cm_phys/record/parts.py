@@ -66,6 +66,17 @@ def new_part(run_dir: str | Path, update: int) -> tuple[Path, int]:
     return run_dir / f"episodes-{session:03d}-from-{update:06d}.mcap", session
 
 
+def read_run(path: str | Path) -> RunLog:
+    """Read a run folder (every part of its log, see the module docstring) or one log file.
+
+    Raises :class:`~.reader.LogError` if the file is missing or is not an MCAP file; a file
+    that ends early is read up to its last complete chunk (``clean`` is then ``False``),
+    and so is a damaged one (``damaged`` is then ``True`` as well).
+    """
+    path = Path(path)
+    return read_run_dir(path) if path.is_dir() else read_file(path)
+
+
 def read_run_dir(run_dir: str | Path) -> RunLog:
     """Every part of a run as one :class:`RunLog` (see the module docstring).
 

@@ -27,8 +27,8 @@ from mcap.records import Channel, Footer, Message, Metadata
 from mcap.stream_reader import StreamReader
 from mcap.writer import MCAP0_MAGIC
 
-from ..cli import UsageError
 from ..config import ConfigError, Scenario, build
+from ..errors import UserError
 from .schemas import (
     FORMAT_VERSION,
     METADATA_NAME,
@@ -40,7 +40,7 @@ from .schemas import (
 )
 
 
-class LogError(UsageError):
+class LogError(UserError):
     """A run log cannot be read (missing, not an MCAP, not ours); the message says why."""
 
 
@@ -220,21 +220,6 @@ def _decode_metadata(data: dict[str, str]) -> dict[str, Any]:
 _TRUNCATION_ERRORS = (McapError, struct.error, ValueError, zstandard.ZstdError, EOFError)
 
 
-def read_run(path: str | Path) -> RunLog:
-    """Read a run folder (every part of its log, see :mod:`.parts`) or one log file.
-
-    Raises :class:`LogError` if the file is missing or is not an MCAP file; a file that
-    ends early is read up to its last complete chunk (``clean`` is then ``False``), and so
-    is a damaged one (``damaged`` is then ``True`` as well).
-    """
-    path = Path(path)
-    if path.is_dir():
-        from .parts import read_run_dir
-
-        return read_run_dir(path)
-    return read_file(path)
-
-
 class _Collector:
     """What :func:`read_file` gathers from a log's records."""
 
@@ -272,7 +257,7 @@ class _Collector:
 
 
 def read_file(path: str | Path) -> RunLog:
-    """Read one log file (see :func:`read_run`)."""
+    """Read one log file (see :func:`.parts.read_run`)."""
     path = Path(path)
     if not path.is_file():
         raise LogError(f"{path}: no such file")

@@ -4,7 +4,7 @@ Each frame is self-contained (arena, walls, grid lines, pursuer cubes, evader sp
 caption, and velocity arrows in physics mode), so seeking anywhere shows the full scene.
 Entities keep fixed ids (``arena``, ``pursuer_0`` …, ``evader``), so each frame replaces the
 previous one. Units are metres in frame ``arena``: a grid cell ``(x, y)`` is drawn at its
-centre ``(x + 0.5, y + 0.5)``, as in :mod:`a2cm_phys.render`.
+centre ``(x + 0.5, y + 0.5)``, as in :mod:`a2cm_phys.envs.render`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 
 from ..config import Scenario
 from ..envs.core import agent_names
-from ..render import EVADER_COLOUR, PURSUER_COLOURS
+from ..envs.render import EVADER_COLOUR, PURSUER_COLOURS
 from .reader import Trajectory
 
 FRAME_ID = "arena"

@@ -86,14 +86,14 @@ def collect(
 
 
 def _figures(data: Data, out: Path, groups: list[str], modes: list[str]) -> dict[str, Path]:
-    from ..plot import Panel, Reference, Run, load_run, plot_aggregate
+    from ..plot import Panel, Reference, Run, load_logged_run, plot_aggregate
     from ..record.reader import LogError
 
     def loaded(results: list[RunResult]) -> list[Run]:
         out = []
         for r in results:
             try:  # a run without a finished episode (e.g. a tiny budget) draws nothing
-                out.append(load_run(r.run.run_dir))
+                out.append(load_logged_run(r.run.run_dir))
             except LogError:
                 continue
         return out

@@ -89,10 +89,11 @@ def training_figures(run_dir: Path) -> dict[str, float]:
 def greedy_eval(run_dir: Path, episodes: int, scenario: Scenario | None = None) -> dict[str, Any]:
     """The run's pursuers, greedy, over ``episodes`` seeded episodes (a learned evader's
     scenario: against the random evader)."""
-    from ..evaluate import load_run, play
+    from ..evaluate import play
     from ..policies import matchup
+    from ..runs import load_trained_run
 
-    trained = load_run(run_dir)
+    trained = load_trained_run(run_dir)
     game_scenario = scenario or trained.scenario
     evader = "random" if game_scenario.evader == "learned" else None
     game = matchup(game_scenario, str(run_dir), evader, greedy=True)
@@ -196,10 +197,10 @@ def exploit(run: PlannedRun, horizon: int | None) -> dict[str, Any]:
     best response to its pursuers (their worst-case capture time) and the pursuers' best
     response to its evader, over ``horizon`` steps (``None``: the scenario's max_steps;
     shorter is a truncated, lower value, ``truncated`` says so)."""
-    from ..evaluate import load_run
     from ..exploitability import exploitability
+    from ..runs import load_trained_run
 
-    trained = load_run(run.run_dir)
+    trained = load_trained_run(run.run_dir)
     full = trained.scenario.max_steps
     h = min(horizon or full, full)
 
@@ -231,7 +232,7 @@ def oracle_worst_case(scenario_name: str, horizon: int | None, cache: Path) -> d
 
     def compute() -> dict[str, Any]:
         from ..solve.best_response import evader_best_response
-        from ..solve.sources import pursuer_source
+        from ..sources import pursuer_source
 
         table = pursuer_source(twin, "oracle").table
         value = evader_best_response(twin, table).value_from_start

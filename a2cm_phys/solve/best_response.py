@@ -204,7 +204,7 @@ def pursuers_best_response(
     The oracle optimises the scenario's own objective (expected raw return until
     termination; with the step penalty alone, the expected capture time). ``joint_policy``
     is its optimal joint policy if already solved against this evader (e.g. a cached
-    :class:`~a2cm_phys.oracle.OracleSolution`'s ``policy``); otherwise it is solved here.
+    :class:`~a2cm_phys.solve.cache.OracleSolution`'s ``policy``); otherwise it is solved here.
     Raises :class:`~.model.TooLargeError` or :class:`~.model.UnsupportedError` as the oracle.
     """
     t0 = time.perf_counter()

@@ -23,7 +23,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from ..config import Scenario
-from ..envs.evader import STAY
+from ..envs.evaders.scripted import STAY
 from ..envs.grid import GridRules
 from .tables import SCRIPTED_EVADERS, check_table, flee_law
 

@@ -70,7 +70,7 @@ class GameValue:
     ``(S, A^N)`` (the oracle's joint-action layout, :func:`~.tables.joint_policy_table`;
     ``None`` when loaded from the cache); ``start``: the default start's index; ``sweeps``:
     Shapley sweeps run; ``seconds``: the solve's; ``cached``: whether loaded from the cache
-    (:func:`a2cm_phys.oracle.load_or_solve_value`).
+    (:func:`a2cm_phys.solve.cache.load_or_solve_value`).
     """
 
     lower: float

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..config import Scenario
 from ..envs.core import default_start
-from ..envs.evader import STAY
+from ..envs.evaders.scripted import STAY
 from ..envs.grid import GridRules
 
 ROW_TOLERANCE = 1e-6

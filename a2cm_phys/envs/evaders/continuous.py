@@ -29,8 +29,8 @@ import math
 
 import numpy as np
 
-from ..config import Scenario
-from .evader import draw
+from ...config import Scenario
+from .scripted import draw
 
 RANDOM_SPEED = 0.8
 """The random evader's speed as a fraction of ``max_speed``: it keeps moving like the grid's

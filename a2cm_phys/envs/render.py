@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .config import Scenario
+from ..config import Scenario
 
 PURSUER_COLOURS = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b")
 EVADER_COLOUR = "#444444"

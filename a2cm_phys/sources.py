@@ -3,10 +3,10 @@ accept, as a library.
 
 Pursuers: ``random`` (uniform), ``oracle`` (the exact optimum of the scenario against its
 scripted evader, from the cache or solved), ``minimax`` (the deterministic team optimal when
-the evader sees its move, :mod:`.minimax`) or a run directory (its trained actors).
+the evader sees its move, :mod:`a2cm_phys.solve.minimax`) or a run directory (its trained actors).
 Evader: ``random``, ``flee``, ``static``, ``equilibrium`` (the game's equilibrium evader,
-:mod:`.nash`) or a run directory with a learned evader. Each
-gives a :class:`Source`: the policy table (:mod:`.tables`) and a label to print.
+:mod:`a2cm_phys.solve.nash`) or a run directory with a learned evader. Each
+gives a :class:`Source`: the policy table (:mod:`a2cm_phys.solve.tables`) and a label to print.
 """
 
 from __future__ import annotations
@@ -18,8 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from ..config import Scenario
-from .tables import (
+from .config import Scenario
+from .runs import load_trained, load_trained_evader
+from .solve.cache import load_or_solve, load_or_solve_value
+from .solve.tables import (
     SCRIPTED_EVADERS,
     joint_policy_table,
     model_table,
@@ -41,8 +43,8 @@ class SourceError(ValueError):
 @dataclass
 class Source:
     """A policy table and what it is. ``solution`` is the oracle's, when the table is one
-    (an :class:`~a2cm_phys.oracle.OracleSolution`, with its cache status and statistics),
-    or the :class:`~.minimax.MinimaxBounds` the minimax team comes from."""
+    (an :class:`~a2cm_phys.solve.cache.OracleSolution`, with its cache status and statistics),
+    or the :class:`~a2cm_phys.solve.minimax.MinimaxBounds` the minimax team comes from."""
 
     table: np.ndarray
     label: str
@@ -54,10 +56,9 @@ def is_run(spec: str, names: tuple[str, ...]) -> bool:
     return spec not in names
 
 
-def load_run(path: str | Path) -> tuple[Scenario, Any]:
-    """The scenario and model of a run directory (or checkpoint file), or a SourceError."""
-    from ..evaluate import load_trained  # torch: only when a run is asked for
-
+def load_pursuer_run(path: str | Path) -> tuple[Scenario, Any]:
+    """The scenario and trained pursuers of a run directory (or checkpoint file), or a
+    SourceError."""
     try:
         return load_trained(path)
     except (OSError, ValueError, KeyError, RuntimeError) as err:
@@ -67,14 +68,9 @@ def load_run(path: str | Path) -> tuple[Scenario, Any]:
 
 def load_evader_run(path: str | Path) -> tuple[Scenario, Any]:
     """The scenario and learned evader of a run; its model's ``action_probs_np`` gives
-    ``(B, 1, A)``. Needs ``a2cm_phys.evaluate.load_trained_evader``."""
-    from .. import evaluate
-
-    loader = getattr(evaluate, "load_trained_evader", None)
-    if loader is None:
-        raise SourceError(f"{path}: runs with a learned evader cannot be loaded yet")
+    ``(B, 1, A)``."""
     try:
-        return loader(path)
+        return load_trained_evader(path)
     except (OSError, ValueError, KeyError, RuntimeError) as err:
         raise SourceError(f"{path}: no learned evader in this run ({err})") from None
 
@@ -107,13 +103,12 @@ def pursuer_source(
     if spec == "random":
         return Source(uniform_table(scenario, n), "uniformly random pursuers")
     if spec == "minimax":
-        from .minimax import minimax_bounds
+        from .solve.minimax import minimax_bounds
 
         bounds = minimax_bounds(scenario)
         label = "the minimax team (deterministic, optimal when the evader sees its move)"
         return Source(joint_policy_table(scenario, bounds.policy), label, bounds)
     if spec == "oracle":
-        from ..oracle import load_or_solve
 
         if scenario.evader not in SCRIPTED_EVADERS:
             raise SourceError(
@@ -123,7 +118,7 @@ def pursuer_source(
         sol = load_or_solve(scenario, cache_dir, use_cache)
         label = f"the oracle's policy (optimal against the {scenario.evader} evader)"
         return Source(joint_policy_table(scenario, sol.policy), label, sol)
-    trained, model = load_run(spec)
+    trained, model = load_pursuer_run(spec)
     check_compatible(scenario, trained, spec)
     return Source(_model_table(scenario, model, n, spec), f"the trained actors of {spec}")
 
@@ -135,18 +130,16 @@ def evader_source(
     use_cache: bool = True,
 ) -> Source:
     """The evader's table of ``random``, ``flee``, ``static``, ``equilibrium`` (the game's,
-    :mod:`.nash`; minutes) or a run directory.
+    :mod:`a2cm_phys.solve.nash`; minutes) or a run directory.
 
     For a scripted evader the oracle against it is loaded from the cache or solved too
     (:attr:`Source.solution`): that is the pursuers' best response.
     """
     if spec in SCRIPTED_EVADERS:
-        from ..oracle import load_or_solve
 
         sol = load_or_solve(dataclasses.replace(scenario, evader=spec), cache_dir, use_cache)
         return Source(scripted_evader_table(scenario, spec), f"the {spec} evader", sol)
     if spec == "equilibrium":
-        from ..oracle import load_or_solve_value
 
         value = load_or_solve_value(scenario, cache_dir, use_cache)
         return Source(value.evader, "the game's equilibrium evader")
@@ -167,7 +160,7 @@ def run_scenario(spec: str, names: tuple[str, ...]) -> Scenario | None:
     if not is_run(spec, names):
         return None
     if names == PURSUER_NAMES:
-        return load_run(spec)[0]
+        return load_pursuer_run(spec)[0]
     return load_evader_run(spec)[0]
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import Scenario
+from ...config import Scenario
 
 EVADER = "evader"
 """The learned evader's agent name (last in the parallel API's ``possible_agents``)."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import Scenario
+from ...config import Scenario
 
 STAY = 4
 """The static evader's action: stay. Cores accept it for the evader even with 4 actions."""

@@ -1,0 +1,157 @@
+"""The package's shape, measured from its source (issue 30): every import between its
+modules, those inside functions included, forms no cycle, and no module imports from a
+layer above its own. ``python tests/test_layout.py`` prints the graph's cycles and upward
+imports."""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "a2cm_phys"
+
+LAYERS = (
+    ("base", ("exitcodes", "errors", "rundir", "seeding", "versions")),
+    ("config", ("config",)),
+    ("envs", ("envs",)),
+    ("algos", ("algos",)),
+    ("record", ("record",)),
+    ("solve", ("solve",)),
+)
+"""Layers from the bottom up, as (name, top-level modules or packages of ``a2cm_phys``);
+a module may import its own layer and those below. Modules not listed are above them all
+(the rest of the layout is still flat)."""
+
+
+def module_name(path: Path) -> str:
+    """``a2cm_phys.envs.grid`` for ``a2cm_phys/envs/grid.py``."""
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def modules() -> dict[str, Path]:
+    """Every module of the package by name."""
+    return {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def imports(path: Path, names: set[str]) -> set[str]:
+    """The package's modules ``path`` imports, anywhere in the file (functions included)."""
+    own = module_name(path)
+    package = own if path.name == "__init__.py" else own.rsplit(".", 1)[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            targets = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - node.level + 1]
+                stem = ".".join([*base, node.module] if node.module else base)
+            else:
+                stem = node.module or ""
+            targets = [stem] + [f"{stem}.{alias.name}" for alias in node.names]
+        else:
+            continue
+        for target in targets:
+            while target and target not in names:
+                target = target.rpartition(".")[0]
+            if target and target != own:
+                out.add(target)
+    return out
+
+
+def graph() -> dict[str, set[str]]:
+    """Module -> the package's modules it imports."""
+    found = modules()
+    names = set(found)
+    return {name: imports(path, names) for name, path in found.items()}
+
+
+def cycles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in edges.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    sys.setrecursionlimit(10_000)
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def layer(name: str) -> int:
+    """The layer of a module (its position in :data:`LAYERS`; above them all if unlisted)."""
+    parts = name.split(".")
+    top = parts[1] if len(parts) > 1 else ""
+    for rank, (_, members) in enumerate(LAYERS):
+        if top in members:
+            return rank
+    return len(LAYERS)
+
+
+def upward(edges: dict[str, set[str]]) -> list[str]:
+    """Imports from a lower layer to a higher one, as ``a -> b``."""
+    return sorted(f"{a} -> {b}" for a, bs in edges.items() for b in bs if layer(b) > layer(a))
+
+
+def test_the_import_graph_has_no_cycle():
+    assert cycles(graph()) == []
+
+
+def test_no_module_imports_from_a_layer_above_its_own():
+    assert upward(graph()) == []
+
+
+@pytest.mark.parametrize("case", ["cycle", "upward"])
+def test_the_checks_see_what_they_look_for(tmp_path, monkeypatch, case):
+    """The graph reader finds a cycle and an upward import in a package made for it,
+    through relative imports inside functions."""
+    package = tmp_path / "a2cm_phys"
+    (package / "envs").mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    (package / "envs" / "__init__.py").write_text("")
+    (package / "config.py").write_text("def f():\n    from .envs import grid\n")
+    (package / "envs" / "grid.py").write_text(
+        "from ..config import f\n" if case == "cycle" else "x = 1\n"
+    )
+    monkeypatch.setattr(sys.modules[__name__], "PACKAGE", package)
+    edges = graph()
+    assert edges["a2cm_phys.config"] == {"a2cm_phys.envs", "a2cm_phys.envs.grid"}
+    if case == "cycle":
+        assert cycles(edges) == [["a2cm_phys.config", "a2cm_phys.envs.grid"]]
+    assert "a2cm_phys.config -> a2cm_phys.envs.grid" in upward(edges)
+
+
+if __name__ == "__main__":
+    g = graph()
+    for c in cycles(g):
+        print("cycle:", " ".join(c))
+    for line in upward(g):
+        print("upward:", line)
