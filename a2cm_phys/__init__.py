@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import gymnasium
 
+from .base.versions import __version__
 from .config import ConfigError, Scenario, load_scenario
 from .envs.parallel import PursuitParallelEnv, make_env
-from .versions import __version__
 
 GYM_ID = "a2cm_phys/Pursuit-v0"
 """Gymnasium id of the joint view (kwarg ``scenario``)."""

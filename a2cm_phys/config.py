@@ -22,7 +22,7 @@ from typing import Any, Literal
 import numpy as np
 import tomllib
 
-from .errors import UserError
+from .base.errors import UserError
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 """Folder of the named scenarios, package data of ``a2cm_phys`` (so a wheel has them too);
@@ -246,7 +246,7 @@ class Train:
     lagrange_lr: float = 1.0
     exploit_every: int = 0  # grid self-play: exact exploitability every K updates (0: off)
     pool_every: int = 0  # self-play: snapshot both teams every K updates (0: simultaneous)
-    pool_size: int = 10  # snapshots kept per team (oldest dropped), see a2cm_phys.opponents
+    pool_size: int = 10  # snapshots kept per team (oldest dropped): training/opponents.py
     pool_latest: float = 0.5  # probability that an update is latest against latest
     # Grid self-play: exploitability descent (a2cm_phys/descent.py). The pursuers' actors
     # learn only by stepping down the discounted value of the evader's exact best response
@@ -359,7 +359,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 """Named sets of :class:`Train` values (``--preset NAME``). ``paper`` is the paper's exact
 method (SPEC §6): RMSprop 7e-3 (Keras rho 0.9, eps 1e-7), one game, plain eq. 13 returns,
 raw rewards. ``descent`` is grid self-play whose teams both learn by exploitability
-descent (:mod:`a2cm_phys.descent`; 250 exact best responses to each, two actor steps each,
+descent (:mod:`a2cm_phys.training.descent`; 250 exact best responses to each, two actor steps each,
 on actors of two hidden layers of 128 over one-hot cells; about 25 minutes on
 ``grid_vs``): pursuers that no evader escapes for long, and an evader that the team which
 knows it catches no sooner than it catches the fleeing one (``BENCHMARKS.md``). Explicit

@@ -109,10 +109,10 @@ def run(scenario: str, algo: str, variant: str, seed: int, steps: int, episodes:
     """Train one run and evaluate it; returns a row of figures."""
     import torch
 
+    from a2cm_phys.analysis.evaluation import play
     from a2cm_phys.config import load_scenario, load_train, resolve_train
-    from a2cm_phys.evaluate import play
-    from a2cm_phys.runs import model_policy
-    from a2cm_phys.train import Trainer
+    from a2cm_phys.training.runs import model_policy
+    from a2cm_phys.training.trainer import Trainer
 
     torch.set_num_threads(1)
     options = variant_options(variant)
@@ -149,10 +149,10 @@ def optimum(scenario: str, episodes: int) -> tuple[float, float, str]:
     """The reference's capture steps and return: the exact optimum on grids; in physics
     mode the better (by return) of the oracle driven in physics and pursuit, played greedy
     over ``episodes`` episodes. Returns ``(steps, return, description)``."""
+    from a2cm_phys.analysis.evaluation import optimum as exact
+    from a2cm_phys.analysis.evaluation import play
+    from a2cm_phys.analysis.policies import pursuer_policy
     from a2cm_phys.config import load_scenario
-    from a2cm_phys.evaluate import optimum as exact
-    from a2cm_phys.evaluate import play
-    from a2cm_phys.policies import pursuer_policy
 
     sc = load_scenario(scenario)
     best = exact(sc)

@@ -36,8 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
+from a2cm_phys.analysis.stats import STATISTICS, bootstrap_ci
+from a2cm_phys.commands.sweep import parse_seeds
 from a2cm_phys.config import Scenario, load_scenario
-from a2cm_phys.runs import load_trained_run
 from a2cm_phys.solve.best_response import (
     evader_best_response,
     evaluate_tables,
@@ -50,8 +51,7 @@ from a2cm_phys.solve.tables import (
     scripted_evader_table,
     uniform_table,
 )
-from a2cm_phys.stats import STATISTICS, bootstrap_ci
-from a2cm_phys.sweep import parse_seeds
+from a2cm_phys.training.runs import load_trained_run
 
 PRESET = "descent"
 """The training preset of the runs (``config.PRESETS``); ``--set`` options win over it."""

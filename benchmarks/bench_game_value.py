@@ -24,7 +24,6 @@ from pathlib import Path
 import torch
 
 from a2cm_phys.config import load_scenario
-from a2cm_phys.runs import load_trained_run
 from a2cm_phys.solve.best_response import evader_best_response, evaluate_tables
 from a2cm_phys.solve.cache import load_or_solve
 from a2cm_phys.solve.minimax import minimax_bounds
@@ -35,6 +34,7 @@ from a2cm_phys.solve.tables import (
     scripted_evader_table,
     uniform_table,
 )
+from a2cm_phys.training.runs import load_trained_run
 
 
 def main() -> None:

@@ -62,7 +62,7 @@ def trainer_run(
     scenario_name: str, envs: int, updates: int, run_dir: Path | None, seed: int
 ) -> float:
     """Seconds for ``updates`` A2CM updates, with the MCAP log in ``run_dir`` if given."""
-    from a2cm_phys.train import Trainer
+    from a2cm_phys.training.trainer import Trainer
 
     cfg = load_train({"num_envs": envs, "updates": updates, "seed": seed})
     with tempfile.TemporaryDirectory() as tmp:

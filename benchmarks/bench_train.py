@@ -19,10 +19,10 @@ import sys
 import tempfile
 import time
 
+from a2cm_phys.analysis.evaluation import play
 from a2cm_phys.config import load_scenario, load_train
-from a2cm_phys.evaluate import play
-from a2cm_phys.runs import model_policy
-from a2cm_phys.train import Trainer
+from a2cm_phys.training.runs import model_policy
+from a2cm_phys.training.trainer import Trainer
 
 
 def train(

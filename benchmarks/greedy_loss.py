@@ -19,10 +19,10 @@ import argparse
 
 import numpy as np
 
+from a2cm_phys.analysis.sources import load_pursuer_run
 from a2cm_phys.solve.cache import load_or_solve
 from a2cm_phys.solve.evaluate import evaluate_policy, policy_chain, state_visits
 from a2cm_phys.solve.tables import model_table, start_state
-from a2cm_phys.sources import load_pursuer_run
 
 
 def main() -> None:

@@ -20,7 +20,7 @@ import tempfile
 import torch
 
 from a2cm_phys.config import Train, load_scenario, load_train
-from a2cm_phys.trainer import Trainer
+from a2cm_phys.training.trainer import Trainer
 
 RUNS = (
     ("grid_collision", "a2cm", 200),

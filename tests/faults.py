@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from a2cm_phys import checkpoint
 from a2cm_phys.record import read_run
 from a2cm_phys.record.integrity import check_run_log
+from a2cm_phys.training import checkpoint
 
 TRAIN = [sys.executable, "-m", "a2cm_phys.train"]
 

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from a2cm_phys.commands.oracle import main
 from a2cm_phys.config import Scenario, load_scenario
 from a2cm_phys.envs.grid import GridCore
-from a2cm_phys.oracle import main
 from a2cm_phys.solve import GridModel, TooLargeError, solve_dp
 from a2cm_phys.solve.best_response import (
     evader_best_response,
@@ -430,8 +430,8 @@ def test_cli_with_a_trained_run(tmp_path: Path, capsys: pytest.CaptureFixture[st
     """A run's actors (general table) against the evader's best response; the scenario is
     the run's own when ``--scenario`` is not given."""
     from a2cm_phys.config import load_train
-    from a2cm_phys.runs import load_trained
-    from a2cm_phys.train import Trainer
+    from a2cm_phys.training.runs import load_trained
+    from a2cm_phys.training.trainer import Trainer
 
     sc = grid(size=3, pursuers=2, max_steps=30)
     cfg = load_train({"num_envs": 4, "updates": 2})
@@ -529,8 +529,8 @@ def test_cli_minimax_team_prints_the_bounds(capsys: pytest.CaptureFixture[str]) 
 
 
 def test_minimax_team_is_escaped_for_its_bound_in_play() -> None:
-    from a2cm_phys.evaluate import play
-    from a2cm_phys.policies import matchup
+    from a2cm_phys.analysis.evaluation import play
+    from a2cm_phys.analysis.policies import matchup
     from a2cm_phys.solve.minimax import minimax_bounds
 
     sc = grid(size=3, pursuers=2, max_steps=50)

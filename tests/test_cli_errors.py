@@ -183,7 +183,7 @@ def test_bad_input_exits_2_with_one_line_and_leaves_nothing(
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")
 def test_cuda_without_cuda_is_a_one_line_error(tmp_path: Path, capsys) -> None:
-    from a2cm_phys.train import main
+    from a2cm_phys.commands.train import main
 
     assert main(["--scenario", "grid", "--device", "cuda", "--logdir", str(tmp_path)]) == 2
     err = capsys.readouterr().err

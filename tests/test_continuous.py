@@ -9,7 +9,7 @@ import pytest
 
 import a2cm_phys
 from a2cm_phys import make_env
-from a2cm_phys.baselines import pursuit_actions
+from a2cm_phys.analysis.baselines import pursuit_actions
 from a2cm_phys.config import ConfigError, load_scenario, scenario_names
 from a2cm_phys.envs.contacts import PURSUER_EVADER, PURSUER_PURSUER
 from a2cm_phys.envs.physics import PhysicsCore

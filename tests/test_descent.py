@@ -10,12 +10,12 @@ import pytest
 import torch
 
 from a2cm_phys.config import ConfigError, load_scenario, load_train
-from a2cm_phys.descent import ExploitabilityDescent, check_descent
 from a2cm_phys.envs.grid import GridRules
 from a2cm_phys.solve.best_response import evader_best_response, pursuers_best_response
 from a2cm_phys.solve.descent import EvaderGradient, WorstCaseGradient
 from a2cm_phys.solve.tables import model_table, n_states, start_state, state_cells
-from a2cm_phys.teams import make_teams
+from a2cm_phys.training.descent import ExploitabilityDescent, check_descent
+from a2cm_phys.training.teams import make_teams
 
 SMALL = {"size": 3, "pursuers": 2, "max_steps": 300}
 
@@ -219,7 +219,7 @@ def test_descent_refuses_arenas_beyond_the_exact_solver() -> None:
 def test_in_self_play_the_pursuers_learn_by_descent_alone(tmp_path) -> None:
     """Updates 1 and 3 step only the evader; update 2 and 4 also the pursuers' actors, by
     descent; the pursuers' learner (its critic) never moves. The summary says so."""
-    from a2cm_phys.trainer import Trainer
+    from a2cm_phys.training.trainer import Trainer
 
     scenario = load_scenario("grid_vs", {**SMALL, "max_steps": 50})
     cfg = load_train({"num_envs": 4, "batch_size": 32, "updates": 4, "descent_every": 2})
@@ -371,7 +371,7 @@ def test_evader_descent_needs_descent_and_no_ending_collisions(
 def test_with_both_teams_the_evader_learns_by_descent_alone(tmp_path) -> None:
     """With ``descent_teams = "both"`` the evader's actor moves at the descent updates only
     (its rollout learner is not stepped), and the summary says both teams descend."""
-    from a2cm_phys.trainer import Trainer
+    from a2cm_phys.training.trainer import Trainer
 
     scenario = load_scenario("grid_vs", {**SMALL, "max_steps": 50})
     cfg = load_train({"num_envs": 4, "batch_size": 32, "updates": 4, "descent_every": 2,

@@ -9,10 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from a2cm_phys.analysis.evaluation import play
+from a2cm_phys.analysis.policies import random_policy
+from a2cm_phys.analysis.stats import bootstrap_ci, describe, mean_and_se, t_interval
+from a2cm_phys.commands.evaluate import main
 from a2cm_phys.config import load_scenario, load_train
-from a2cm_phys.evaluate import main, play, random_policy
-from a2cm_phys.stats import EpisodeStats, bootstrap_ci, describe, mean_and_se, t_interval
-from a2cm_phys.train import Trainer
+from a2cm_phys.training.episode_stats import EpisodeStats
+from a2cm_phys.training.trainer import Trainer
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +125,7 @@ def test_the_oracle_is_one_team_whatever_evader_it_meets(tmp_path) -> None:
     evader) in every column, not each column's best response (which differs)."""
     import dataclasses
 
-    from a2cm_phys.policies import OraclePolicy, matchup
+    from a2cm_phys.analysis.policies import OraclePolicy, matchup
     from a2cm_phys.solve.tables import joint_observations, valid_states
 
     sc = load_scenario("grid", {"size": 3, "pursuers": 2, "max_steps": 50})

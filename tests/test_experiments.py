@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats as st
 
-from a2cm_phys import experiments
-from a2cm_phys.stats import (
+from a2cm_phys.analysis.stats import (
     iqm,
     iqm_interval,
     mean_interval,
@@ -21,6 +20,7 @@ from a2cm_phys.stats import (
     verdict_test,
     welch_p,
 )
+from a2cm_phys.commands import experiments
 
 TINY = [
     "--seeds", "0", "--modes", "grid", "--updates", "3", "--cont-updates", "3",
@@ -110,7 +110,7 @@ def test_bad_options_are_one_line_errors(
 
 
 def test_session_totals_count_overlapping_sessions_once() -> None:
-    from a2cm_phys.report.build import session_totals
+    from a2cm_phys.study.report.build import session_totals
 
     sessions = [
         {"command": "x --sequential", "elapsed_s": 50.0},  # an old record: no start time
@@ -195,7 +195,7 @@ def test_verdicts() -> None:
 def test_cross_play_cache_tells_a_retrained_run_from_the_old_one(tmp_path: Path) -> None:
     import os
 
-    from a2cm_phys.report.measure import _stamped
+    from a2cm_phys.study.report.measure import _stamped
 
     run = tmp_path / "grid_vs-a2cm-s0"
     run.mkdir()

@@ -18,12 +18,12 @@ import pytest
 import torch
 from faults import TRAIN, invariant_problems, kill_at_write, kill_trial, new_run_args
 
-from a2cm_phys import checkpoint
+from a2cm_phys.commands.replay import main as replay_main
+from a2cm_phys.commands.train import EXIT_NO_SPACE, main
 from a2cm_phys.record import read_run
 from a2cm_phys.record.writer import EpisodeRecorder
-from a2cm_phys.replay import main as replay_main
-from a2cm_phys.rundir import run_lock
-from a2cm_phys.train import EXIT_NO_SPACE, main
+from a2cm_phys.training import checkpoint
+from a2cm_phys.training.rundir import run_lock
 
 GRID = ["--scenario", "grid_collision", "--num-envs", "4", "--batch-size", "32", "--seed", "1",
         "--no-progress"]  # fmt: skip
@@ -256,7 +256,7 @@ def test_a_corrupt_checkpoint_is_an_error_and_resume_falls_back(tmp_path, capsys
     _flip(latest, len(latest.read_bytes()) // 2)
     with pytest.raises(ValueError, match=r"checkpoint\.pt: damaged checkpoint"):
         checkpoint.load(run_dir)
-    from a2cm_phys.evaluate import main as evaluate_main
+    from a2cm_phys.commands.evaluate import main as evaluate_main
 
     capsys.readouterr()
     assert evaluate_main([str(run_dir), "--episodes", "5"]) == 2

@@ -13,6 +13,7 @@ from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 
 from a2cm_phys import make_env
 from a2cm_phys.algos import make_model
+from a2cm_phys.analysis.policies import check_layout
 from a2cm_phys.config import (
     MAX_WEIGHTS,
     PRESETS,
@@ -25,7 +26,6 @@ from a2cm_phys.config import (
 )
 from a2cm_phys.envs.gym import PursuitEnv
 from a2cm_phys.envs.vector import VectorEnv
-from a2cm_phys.policies import check_layout
 
 
 def _one_error_line(capsys: pytest.CaptureFixture[str], *needles: str) -> str:
@@ -148,7 +148,7 @@ def test_networks_too_large_to_allocate_are_refused_before_anything_is_built(
     [{}, {"algo": "a2c", "layers": 3, "hidden": 16}, {"encoding": "onehot", "layers": 2}],
 )
 def test_the_weight_count_is_the_built_networks(scenario: str, train: dict) -> None:
-    from a2cm_phys.teams import make_teams
+    from a2cm_phys.training.teams import make_teams
 
     sc = load_scenario(scenario)
     cfg = resolve_train(sc, load_train({**train, "updates": 1}))

@@ -13,17 +13,23 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "a2cm_phys"
 
+COMMANDS = ("train", "evaluate", "replay", "plot", "oracle", "sweep", "experiments")
+
 LAYERS = (
-    ("base", ("exitcodes", "errors", "rundir", "seeding", "versions")),
+    ("base", ("base",)),
     ("config", ("config",)),
     ("envs", ("envs",)),
     ("algos", ("algos",)),
     ("record", ("record",)),
     ("solve", ("solve",)),
+    ("training", ("training",)),
+    ("analysis", ("analysis",)),
+    ("study", ("study",)),
+    ("commands", ("commands", "__main__", *COMMANDS)),
 )
 """Layers from the bottom up, as (name, top-level modules or packages of ``a2cm_phys``);
-a module may import its own layer and those below. Modules not listed are above them all
-(the rest of the layout is still flat)."""
+a module may import its own layer and those below. The package's face (``__init__``) is
+above them all; the ``python -m a2cm_phys.COMMAND`` shims sit with the commands."""
 
 
 def module_name(path: Path) -> str:
@@ -35,6 +41,23 @@ def module_name(path: Path) -> str:
 def modules() -> dict[str, Path]:
     """Every module of the package by name."""
     return {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def missing_modules() -> list[str]:
+    """``file: module`` for every ``from MODULE import …`` of the package naming a module
+    that does not exist (a move left behind)."""
+    found = modules()
+    out = []
+    for name, path in found.items():
+        package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.level:
+                base = package.split(".")
+                base = base[: len(base) - node.level + 1]
+                stem = ".".join([*base, node.module] if node.module else base)
+                if stem not in found:
+                    out.append(f"{path.relative_to(PACKAGE.parent)}: {stem}")
+    return out
 
 
 def imports(path: Path, names: set[str]) -> set[str]:
@@ -125,6 +148,10 @@ def test_the_import_graph_has_no_cycle():
     assert cycles(graph()) == []
 
 
+def test_every_relative_import_names_a_module_that_exists():
+    assert missing_modules() == []
+
+
 def test_no_module_imports_from_a_layer_above_its_own():
     assert upward(graph()) == []
 
@@ -155,3 +182,5 @@ if __name__ == "__main__":
         print("cycle:", " ".join(c))
     for line in upward(g):
         print("upward:", line)
+    for line in missing_modules():
+        print("missing:", line)

@@ -17,7 +17,7 @@ from a2cm_phys.algos.distributions import GaussianActions
 from a2cm_phys.algos.learner import Learner, NonFiniteLoss
 from a2cm_phys.algos.models import ActorCritic, StackedLinear
 from a2cm_phys.config import Train, load_train, preset
-from a2cm_phys.rollout import allocate_batch
+from a2cm_phys.training.rollout import allocate_batch
 
 torch.set_num_threads(1)
 

@@ -5,11 +5,12 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from a2cm_phys.analysis.evaluation import play
+from a2cm_phys.analysis.policies import random_policy
+from a2cm_phys.analysis.stats import mean_and_se
 from a2cm_phys.config import load_scenario, load_train
-from a2cm_phys.evaluate import play, random_policy
-from a2cm_phys.runs import model_policy
-from a2cm_phys.stats import mean_and_se
-from a2cm_phys.train import Trainer
+from a2cm_phys.training.runs import model_policy
+from a2cm_phys.training.trainer import Trainer
 
 Z = 4.0
 """Standard errors the improvement must exceed (one-sided; chance ~3e-5 if no effect)."""

@@ -15,8 +15,8 @@ import pytest
 from scipy.optimize import linprog
 from test_best_response import SMALL, Brute, grid
 
+from a2cm_phys.commands.oracle import main
 from a2cm_phys.config import Rewards, Scenario
-from a2cm_phys.oracle import main
 from a2cm_phys.solve.best_response import (
     evader_best_response,
     evaluate_tables,
@@ -160,8 +160,8 @@ def grid_vs_twin(sc: Scenario) -> Scenario:
 def test_equilibrium_evader_plays_as_its_table_says(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from a2cm_phys.evaluate import play
-    from a2cm_phys.policies import matchup
+    from a2cm_phys.analysis.evaluation import play
+    from a2cm_phys.analysis.policies import matchup
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))  # where the named policy caches it
 
@@ -179,7 +179,7 @@ def test_equilibrium_evader_plays_as_its_table_says(
 def test_cli_best_response_to_the_equilibrium_evader(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    from a2cm_phys.evaluate import main as evaluate
+    from a2cm_phys.commands.evaluate import main as evaluate
 
     value = game_value(grid(size=3, pursuers=2, max_steps=50))
     argv = [*SMALL, "--best-response", "pursuers", "--evader", "equilibrium"]

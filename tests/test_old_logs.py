@@ -11,10 +11,10 @@ from pathlib import Path
 import pytest
 from faults import invariant_problems
 
-from a2cm_phys import checkpoint
+from a2cm_phys.commands.replay import main as replay_main
+from a2cm_phys.commands.train import main as train_main
 from a2cm_phys.record import read_run
-from a2cm_phys.replay import main as replay_main
-from a2cm_phys.train import main as train_main
+from a2cm_phys.training import checkpoint
 
 OLD = Path(__file__).parent / "data" / "pre_issue29"
 

@@ -1,4 +1,4 @@
-"""Fictitious self-play (:mod:`a2cm_phys.opponents`): a bounded pool of past actors, seeded
+"""Fictitious self-play (:mod:`a2cm_phys.training.opponents`): a bounded pool of past actors, seeded
 draws of who plays whom, snapshots that are copies, only the live side learning, an exact
 resume and clear configuration errors."""
 
@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 import torch
 
-from a2cm_phys import checkpoint
+from a2cm_phys.commands.train import EXIT_INTERRUPTED, main
 from a2cm_phys.config import ConfigError, load_scenario, load_train
 from a2cm_phys.envs.vector import VectorEnv
-from a2cm_phys.opponents import LATEST, OpponentPool, Pairing, actor_weights
-from a2cm_phys.teams import make_teams
-from a2cm_phys.train import EXIT_INTERRUPTED, main
-from a2cm_phys.trainer import Trainer
+from a2cm_phys.training import checkpoint
+from a2cm_phys.training.opponents import LATEST, OpponentPool, Pairing, actor_weights
+from a2cm_phys.training.teams import make_teams
+from a2cm_phys.training.trainer import Trainer
 
 SMALL = {"num_envs": 4, "batch_size": 32}
 VS = ("--scenario", "grid_vs", "--num-envs", "4", "--batch-size", "32", "--seed", "5")

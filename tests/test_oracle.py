@@ -13,11 +13,11 @@ import itertools
 import numpy as np
 import pytest
 
+from a2cm_phys.analysis.policies import OraclePolicy
+from a2cm_phys.commands.oracle import main
 from a2cm_phys.config import Scenario, load_scenario
 from a2cm_phys.envs.evaders.scripted import STAY, flee_actions
 from a2cm_phys.envs.grid import GridCore, GridRules
-from a2cm_phys.oracle import main
-from a2cm_phys.policies import OraclePolicy
 from a2cm_phys.solve import GridModel, TooLargeError, solve_dp, state_visits
 from a2cm_phys.solve.cache import load_or_solve
 

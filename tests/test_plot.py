@@ -10,7 +10,8 @@ from PIL import Image
 from test_record import make_log
 from test_replay import damage_a_chunk
 
-from a2cm_phys.plot import load_logged_run, log_files, main, moving_average
+from a2cm_phys.analysis.figures import load_logged_run, log_files, moving_average
+from a2cm_phys.commands.plot import main
 from a2cm_phys.record import read_run
 from a2cm_phys.record.parts import new_part
 
@@ -129,7 +130,7 @@ def test_exploitability_is_drawn_from_sparse_update_metrics(tmp_path: Path) -> N
 
 
 def test_runs_grouped_by_label_are_plotted_as_seeds_against_env_steps(tmp_path: Path) -> None:
-    from a2cm_phys.plot import binned, seed_band
+    from a2cm_phys.analysis.figures import binned, seed_band
 
     for algo in ("a2c", "a2cm"):
         for seed in (0, 1):
@@ -166,8 +167,8 @@ def test_exploitability_figure_shows_the_cached_game_value(
 ) -> None:
     from matplotlib.figure import Figure
 
+    from a2cm_phys.analysis.figures import _draw_game_values
     from a2cm_phys.config import load_scenario
-    from a2cm_phys.plot import _draw_game_values
     from a2cm_phys.solve.cache import cached_value, load_or_solve_value
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))

@@ -15,9 +15,9 @@ from mcap.writer import Writer
 from PIL import Image
 from test_record import FOXGLOVE_SCENE, make_log, validator
 
+from a2cm_phys.commands.replay import EXPORT_TOPIC, main
 from a2cm_phys.record import read_run
 from a2cm_phys.record.schemas import SUMMARY_TOPIC, TRAJECTORY_TOPIC
-from a2cm_phys.replay import EXPORT_TOPIC, main
 
 
 @pytest.fixture(scope="module")

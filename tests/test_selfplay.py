@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 import torch
 
-from a2cm_phys import checkpoint
+from a2cm_phys.commands.train import main
 from a2cm_phys.config import load_scenario, load_train
 from a2cm_phys.envs.vector import VectorEnv
-from a2cm_phys.rollout import collect
-from a2cm_phys.seeding import policy_rng
-from a2cm_phys.teams import make_teams
-from a2cm_phys.train import main
-from a2cm_phys.trainer import Trainer
+from a2cm_phys.training import checkpoint
+from a2cm_phys.training.rollout import collect
+from a2cm_phys.training.seeding import policy_rng
+from a2cm_phys.training.teams import make_teams
+from a2cm_phys.training.trainer import Trainer
 
 VS = ("--scenario", "grid_vs", "--num-envs", "4", "--batch-size", "32", "--seed", "5")
 CONSTANT_LR = ("--set", "train.lr_schedule=constant")  # an extended run: the same schedule

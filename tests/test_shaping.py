@@ -197,7 +197,7 @@ def test_bad_coefficient_names_the_key():
 
 def test_default_shaping_is_resolved_per_control_type(tmp_path):
     from a2cm_phys.config import resolve_train
-    from a2cm_phys.trainer import Trainer
+    from a2cm_phys.training.trainer import Trainer
 
     assert Train().distance_shaping is None and Train().area_shaping is None
     assert Train().max_grad_norm is None
@@ -228,7 +228,7 @@ def test_default_shaping_is_resolved_per_control_type(tmp_path):
 def test_run_config_records_the_shaping_the_learner_saw(tmp_path):
     import json
 
-    from a2cm_phys import train
+    from a2cm_phys.commands import train
 
     code = train.main(
         [

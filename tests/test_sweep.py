@@ -7,9 +7,10 @@ import json
 
 import pytest
 
-from a2cm_phys import sweep
-from a2cm_phys.sweep import RunSpec, run_sequential
-from a2cm_phys.train import main as train_main
+from a2cm_phys.commands import sweep
+from a2cm_phys.commands.train import main as train_main
+from a2cm_phys.study import sweep as study_sweep
+from a2cm_phys.study.sweep import RunSpec, run_sequential
 
 TINY = {"updates": 4, "num_envs": 4, "batch_size": 16}
 KEYS = ("episodes", "mean_length_last_1000", "collisions", "steps")
@@ -68,7 +69,7 @@ def test_failing_run_is_retried_and_reported_while_others_finish(tmp_path):
 
 
 def test_an_interrupted_run_is_resumed_not_restarted(tmp_path, monkeypatch):
-    from a2cm_phys.train import Trainer
+    from a2cm_phys.training.trainer import Trainer
 
     spec = specs()[0]
     original = Trainer._one_update
@@ -133,13 +134,13 @@ def local_ray():
 def test_ray_sweep_equals_sequential_retries_failures_and_skips(tmp_path, local_ray):
     plan = specs()
     plan.append(RunSpec("grid", "a2cm", 9, {**TINY, "reward_scale": 1e300}, record=False))
-    outcomes = sweep.run_on_ray(plan, tmp_path / "ray", lambda o: None, None, 1.0)
+    outcomes = study_sweep.run_on_ray(plan, tmp_path / "ray", lambda o: None, None, 1.0)
     by_name = {o.spec.name: o for o in outcomes}
     assert by_name[plan[-1].name].error and "nonfinite" in by_name[plan[-1].name].error
     reference = run_sequential(plan[:-1], tmp_path / "seq", lambda o: None)
     for ref in reference:
         assert same(by_name[ref.spec.name].summary, ref.summary)
-    again = sweep.run_on_ray(plan[:-1], tmp_path / "ray", lambda o: None, None, 1.0)
+    again = study_sweep.run_on_ray(plan[:-1], tmp_path / "ray", lambda o: None, None, 1.0)
     assert {o.summary["sweep"] for o in again} == {"skipped"}
 
 
@@ -195,7 +196,7 @@ def test_sweep_dir_is_an_alias_of_logdir(tmp_path, capsys):
 
 
 def test_an_interrupt_stops_the_sweep_instead_of_retrying(tmp_path, monkeypatch, capsys):
-    from a2cm_phys.train import Trainer
+    from a2cm_phys.training.trainer import Trainer
 
     original, calls = Trainer._one_update, []
 

@@ -15,12 +15,13 @@ import numpy as np
 import pytest
 import torch
 
-from a2cm_phys import checkpoint
 from a2cm_phys.algos import NonFiniteLoss
 from a2cm_phys.algos.learner import Learner
+from a2cm_phys.commands.train import EXIT_INTERRUPTED, EXIT_NONFINITE, main
 from a2cm_phys.config import load_scenario, load_train, preset, scenario_names
 from a2cm_phys.envs.vector import VectorEnv
-from a2cm_phys.train import EXIT_INTERRUPTED, EXIT_NONFINITE, Trainer, main
+from a2cm_phys.training import checkpoint
+from a2cm_phys.training.trainer import Trainer
 
 TIMING = ("wall_time_s", "steps_per_s", "run_dir", "status", "last_checkpoint_update")
 HAS_PHYSICS = importlib.util.find_spec("a2cm_phys.envs.physics") is not None
@@ -270,10 +271,10 @@ def test_physics_resume_restarts_games_deterministically(tmp_path: Path) -> None
 
 def test_a_resumed_run_continues_its_episode_log(tmp_path, monkeypatch):
     """Every episode of an interrupted and resumed run has a summary in the run's logs."""
-    from a2cm_phys.plot import log_files
+    from a2cm_phys.analysis.figures import log_files
+    from a2cm_phys.commands.train import main as train_main
     from a2cm_phys.record import read_run
-    from a2cm_phys.train import Trainer
-    from a2cm_phys.train import main as train_main
+    from a2cm_phys.training.trainer import Trainer
 
     original = Trainer._one_update
 

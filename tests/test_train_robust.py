@@ -11,12 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from a2cm_phys import checkpoint
-from a2cm_phys.plot import load_logged_run
+from a2cm_phys.analysis.figures import load_logged_run
+from a2cm_phys.commands.replay import main as replay_main
+from a2cm_phys.commands.train import EXIT_INTERRUPTED, EXIT_WORKER_DIED, main
 from a2cm_phys.record import read_run
 from a2cm_phys.record.writer import EpisodeRecorder
-from a2cm_phys.replay import main as replay_main
-from a2cm_phys.train import EXIT_INTERRUPTED, EXIT_WORKER_DIED, Trainer, main
+from a2cm_phys.training import checkpoint
+from a2cm_phys.training.trainer import Trainer
 
 GRID = ["--scenario", "grid", "--num-envs", "4", "--batch-size", "32", "--seed", "3",
         "--no-progress"]  # fmt: skip
@@ -166,7 +167,7 @@ def test_a_run_that_cannot_start_leaves_no_run_directory(tmp_path, monkeypatch, 
     def no_memory(*args, **kwargs):
         raise MemoryError("no memory for the games")
 
-    monkeypatch.setattr("a2cm_phys.trainer.VectorEnv", no_memory)
+    monkeypatch.setattr("a2cm_phys.training.trainer.VectorEnv", no_memory)
     assert main([*GRID, "--updates", "1", "--logdir", str(tmp_path / "logs")]) == 2
     err = capsys.readouterr().err
     assert "out of memory" in err and err.count("\n") == 1

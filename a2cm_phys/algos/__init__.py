@@ -8,16 +8,16 @@ learner.
 - :class:`Learner`: one autograd loss and optimiser step; :class:`NonFiniteLoss`.
 """
 
-from a2cm_phys.algos.distributions import (
+from .distributions import (
     ActionDistribution,
     CategoricalActions,
     GaussianActions,
     sample_categorical,
 )
-from a2cm_phys.algos.learner import BATCH_KEYS, Learner, NonFiniteLoss
-from a2cm_phys.algos.models import ActorCritic, StackedLinear, action_distribution, make_model
-from a2cm_phys.algos.normalize import ValueNorm
-from a2cm_phys.algos.returns import advantages, discounted_returns, discounted_returns_np, gae
+from .learner import BATCH_KEYS, Learner, NonFiniteLoss
+from .models import ActorCritic, StackedLinear, action_distribution, make_model
+from .normalize import ValueNorm
+from .returns import advantages, discounted_returns, discounted_returns_np, gae
 
 __all__ = [
     "BATCH_KEYS",

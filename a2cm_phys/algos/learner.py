@@ -42,14 +42,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
-from a2cm_phys.algos.normalize import ValueNorm
-from a2cm_phys.algos.returns import gae
-from a2cm_phys.algos.rmsprop import KerasRMSprop
-from a2cm_phys.config import PRESETS
+from ..config import PRESETS
+from .normalize import ValueNorm
+from .returns import gae
+from .rmsprop import KerasRMSprop
 
 if TYPE_CHECKING:
-    from a2cm_phys.algos.models import ActorCritic
-    from a2cm_phys.config import Train
+    from ..config import Train
+    from .models import ActorCritic
 
 BATCH_KEYS = ("obs", "actions", "rewards", "terminated", "truncated", "final_obs", "next_obs")
 """Keys :meth:`Learner.update` reads from a batch (all time-major except ``next_obs``); a

@@ -37,16 +37,16 @@ import torch.nn.functional as F
 from torch import distributions as D
 from torch import nn
 
-from a2cm_phys.algos.distributions import (
+from ..envs.core import REWARD_PARTS
+from .distributions import (
     ActionDistribution,
     CategoricalActions,
     GaussianActions,
     sample_categorical,
 )
-from a2cm_phys.envs.core import REWARD_PARTS
 
 if TYPE_CHECKING:
-    from a2cm_phys.config import Scenario, Train
+    from ..config import Scenario, Train
 
 __all__ = ["ActorCritic", "OneHotCells", "StackedLinear", "make_model", "sample_categorical"]
 
@@ -364,7 +364,7 @@ def make_model(
     (independent of the global torch RNG). With ``split_rewards`` each critic predicts one
     value per reward component (:data:`~a2cm_phys.envs.core.REWARD_PARTS`).
     """
-    from a2cm_phys.config import resolve_train
+    from ..config import resolve_train
 
     if generator is None:
         generator = torch.Generator().manual_seed(train_cfg.seed)

@@ -44,8 +44,8 @@ from typing import Any
 
 import numpy as np
 
-from a2cm_phys.algos.voronoi import cell_area
-from a2cm_phys.config import Scenario
+from ..config import Scenario
+from .voronoi import cell_area
 
 
 class ProgressShaping:

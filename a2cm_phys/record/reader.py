@@ -27,8 +27,8 @@ from mcap.records import Channel, Footer, Message, Metadata
 from mcap.stream_reader import StreamReader
 from mcap.writer import MCAP0_MAGIC
 
+from ..base.errors import UserError
 from ..config import ConfigError, Scenario, build
-from ..errors import UserError
 from .schemas import (
     FORMAT_VERSION,
     METADATA_NAME,

@@ -33,9 +33,9 @@ from typing import Any
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
+from ..base.versions import __version__
 from ..config import Scenario, to_dict
 from ..envs.vector import EpisodeSummary, VecStep, VectorEnv
-from ..versions import __version__
 from .block import Block
 from .buffers import StepBuffers
 from .jsontext import json_array, json_object, json_value

@@ -21,13 +21,7 @@ import numpy as np
 
 from ..config import Scenario
 from ..envs.core import default_start
-from . import (
-    GridModel,
-    capture_distribution,
-    evaluate_policy,
-    policy_chain,
-    solve_dp,
-)
+from . import GridModel, capture_distribution, evaluate_policy, policy_chain, solve_dp
 from .evaluate import CaptureDistribution, PolicyChain
 
 if TYPE_CHECKING:  # the solver imports torch: only when the game's value is asked for

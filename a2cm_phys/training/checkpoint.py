@@ -1,7 +1,7 @@
 """Save and load a run's state: checksummed, atomic, with the previous good one kept.
 
 A checkpoint is a plain dict of tensors, numpy arrays and Python scalars (see
-:meth:`a2cm_phys.trainer.Trainer.checkpoint_state`). On disk it is :data:`MAGIC`, the
+:meth:`a2cm_phys.training.trainer.Trainer.checkpoint_state`). On disk it is :data:`MAGIC`, the
 SHA-256 of the payload, then the payload (``torch.save`` of the dict), so that a flipped
 byte anywhere is caught on load instead of changing a weight. Loading uses
 ``weights_only=True`` with numpy's array types allowed, so no arbitrary code runs when a
@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from .record.integrity import SavedCount
+from ..record.integrity import SavedCount
 from .rundir import CHECKPOINT_NAME, PREVIOUS_CHECKPOINT_NAME, fsync_dir, write_atomic
 
 FORMAT = 1

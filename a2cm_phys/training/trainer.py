@@ -2,7 +2,7 @@
 
 One trainer for both algorithms; only the model differs (``make_model``: one critic for
 A2CM, N for A2C). Each update collects ``batch_size`` steps (``batch_size / num_envs`` per
-game) and takes one learner step per team (:mod:`a2cm_phys.teams`: the pursuers, and a
+game) and takes one learner step per team (:mod:`a2cm_phys.training.teams`: the pursuers, and a
 learned evader when the scenario has one). The command line over it is
 :mod:`a2cm_phys.train`.
 
@@ -29,9 +29,9 @@ import torch
 from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
-from . import checkpoint
-from .algos import NonFiniteLoss
-from .config import (
+from ..algos import NonFiniteLoss
+from ..base.exitcodes import OUT_OF_SPACE
+from ..config import (
     ConfigError,
     Scenario,
     Train,
@@ -41,15 +41,15 @@ from .config import (
     stored_train,
     to_dict,
 )
+from ..envs.vector import VectorEnv
+from . import checkpoint
 from .descent import ExploitabilityDescent, check_descent
-from .envs.vector import VectorEnv
-from .exitcodes import OUT_OF_SPACE
+from .episode_stats import EpisodeStats
 from .exploitability import exploitability, solvable
 from .opponents import LATEST, PAIRING_CODES, OpponentPool, Pairing, check_pool
 from .rollout import StepHook, collect
 from .rundir import CONFIG_NAME, SUMMARY_NAME, write_atomic
 from .seeding import policy_rng
-from .stats import EpisodeStats
 from .teams import make_teams
 
 _ROLLOUT, _LEARN, _IDLE = "rollout", "learn", "idle"
@@ -119,13 +119,13 @@ class Trainer:
         self.model, self.learner = self.pursuers.model, self.pursuers.learner
         self.batch = self.pursuers.batch
         self.rng = policy_rng(cfg.seed)
-        self.pool = (  # fictitious self-play (a2cm_phys.opponents); None: simultaneous
+        self.pool = (  # fictitious self-play (a2cm_phys.training.opponents); None: simultaneous
             OpponentPool(self.model, self.evader.model, cfg.pool_size, cfg.pool_latest, cfg.seed)
             if cfg.pool_every and self.evader is not None
             else None
         )
         self.pairing: Pairing = LATEST
-        self.descent = (  # grid self-play against the exact best response (a2cm_phys.descent)
+        self.descent = (  # grid self-play against the exact best response (training/descent.py)
             ExploitabilityDescent(
                 scenario,
                 cfg,
@@ -154,7 +154,7 @@ class Trainer:
 
     # ------------------------------------------------------------------ state
     def checkpoint_state(self) -> dict[str, Any]:
-        """Everything a resume needs, as a dict for :func:`a2cm_phys.checkpoint.save`."""
+        """Everything a resume needs, as a dict for :func:`a2cm_phys.training.checkpoint.save`."""
         return {
             "scenario": to_dict(self.scenario),
             "train": to_dict(self.cfg),
@@ -395,7 +395,7 @@ class Trainer:
         if self.evader is not None and pairing.learns("evader") and not self._evader_descends():
             evader_metrics = self.evader.learner.update(self.evader.batch, progress)
             self.last_metrics.update({f"evader_{k}": v for k, v in evader_metrics.items()})
-        if pool is not None:  # who played: see a2cm_phys.opponents.PAIRING_CODES
+        if pool is not None:  # who played: see a2cm_phys.training.opponents.PAIRING_CODES
             self.last_metrics["pool_pairing"] = PAIRING_CODES[pairing.kind]
             self.last_metrics["pool_snapshot_update"] = pairing.taken_at
         every = self.cfg.descent_every
@@ -606,7 +606,7 @@ def _worker_error(scenario: Scenario) -> type[Exception]:
     grid runs do not import the physics engine)."""
     if scenario.mode != "physics":
         return _NeverRaised
-    from .envs.workers import WorkerError
+    from ..envs.workers import WorkerError
 
     return WorkerError
 
@@ -623,10 +623,10 @@ def open_recorder(trainer: Trainer) -> Any:
     metrics)`` after every update.
     """
     try:
-        from .record.writer import EpisodeRecorder
+        from ..record.writer import EpisodeRecorder
     except ImportError:  # the record package is optional for training
         return None
-    from .record.parts import new_part, part_files
+    from ..record.parts import new_part, part_files
 
     # A resumed session continues the log in a file of its own (an earlier one may have been
     # cut short by a crash, or got ahead of the checkpoint), on the same clock and episode

@@ -7,9 +7,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..algos import ActorCritic, make_model
+from ..config import ConfigError, Scenario, build, load_train, stored_train
 from . import checkpoint
-from .algos import ActorCritic, make_model
-from .config import ConfigError, Scenario, build, load_train, stored_train
 from .rollout import Policy
 from .teams import evader_train_cfg
 

@@ -1,5 +1,5 @@
 """The claims table: each claim of the paper and of ours, measured, with a 95% CI and a
-verdict naming its test (:mod:`a2cm_phys.stats`: Welch t-tests, bootstrap intervals,
+verdict naming its test (:mod:`a2cm_phys.analysis.stats`: Welch t-tests, bootstrap intervals,
 stratified-bootstrap probabilities of improvement)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..stats import (
+from ...analysis.stats import (
     HOLDS,
     UNSURE,
     Interval,

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..stats import iqm_interval, mean_interval
+from ...analysis.stats import iqm_interval, mean_interval
 from .claims import PAPER, Claim, Data, ci_text, claims_table, fmt, score
 from .measure import RunResult
 from .plan import CONTINUOUS, EXPERIMENTS, GROUP_TITLES, PlannedRun

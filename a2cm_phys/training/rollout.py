@@ -14,8 +14,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .envs.core import REWARD_PARTS, reward_parts
-from .envs.vector import EpisodeSummary, VecStep, VectorEnv
+from ..envs.core import REWARD_PARTS, reward_parts
+from ..envs.vector import EpisodeSummary, VecStep, VectorEnv
 
 Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
 """``policy(obs (B, obs_dim), rng) -> actions (B, N, *action_shape)``."""

@@ -18,16 +18,16 @@ from typing import Any
 
 import numpy as np
 
-from .config import Scenario
-from .runs import load_trained, load_trained_evader
-from .solve.cache import load_or_solve, load_or_solve_value
-from .solve.tables import (
+from ..config import Scenario
+from ..solve.cache import load_or_solve, load_or_solve_value
+from ..solve.tables import (
     SCRIPTED_EVADERS,
     joint_policy_table,
     model_table,
     scripted_evader_table,
     uniform_table,
 )
+from ..training.runs import load_trained, load_trained_evader
 
 PURSUER_NAMES = ("random", "oracle", "minimax")
 """Named pursuer policies (anything else is a run directory)."""
@@ -103,7 +103,7 @@ def pursuer_source(
     if spec == "random":
         return Source(uniform_table(scenario, n), "uniformly random pursuers")
     if spec == "minimax":
-        from .solve.minimax import minimax_bounds
+        from ..solve.minimax import minimax_bounds
 
         bounds = minimax_bounds(scenario)
         label = "the minimax team (deterministic, optimal when the evader sees its move)"

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .. import __version__
+from ...base.versions import __version__
 from .claims import Data, our_claims, paper_claims
 from .markdown import report
 from .measure import (
@@ -86,8 +86,8 @@ def collect(
 
 
 def _figures(data: Data, out: Path, groups: list[str], modes: list[str]) -> dict[str, Path]:
-    from ..plot import Panel, Reference, Run, load_logged_run, plot_aggregate
-    from ..record.reader import LogError
+    from ...analysis.figures import Panel, Reference, Run, load_logged_run, plot_aggregate
+    from ...record.reader import LogError
 
     def loaded(results: list[RunResult]) -> list[Run]:
         out = []

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .config import Scenario
+from ..config import Scenario
 
 UP, DOWN, LEFT, RIGHT, STAY = range(5)
 

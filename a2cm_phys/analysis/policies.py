@@ -1,7 +1,7 @@
 """Named policies of either side, as rollout policies: what learned ones are measured against.
 
 - ``random``: uniform actions (discrete), or uniform commands in the unit square (continuous).
-- ``pursuit``: every pursuer heads straight for the evader (:mod:`a2cm_phys.baselines`).
+- ``pursuit``: every pursuer heads straight for the evader (:mod:`a2cm_phys.analysis.baselines`).
 - ``oracle``: the exact optimum of the grid game (:mod:`a2cm_phys.oracle`); in physics
   mode the grid oracle driven in the physics arena: each body's centre is mapped to the
   cell it lies in, and the oracle's move becomes the velocity command in that direction.
@@ -17,7 +17,7 @@ Evaders the solvers give (grid mode only): ``best-response``, the exact best res
 pursuers of the pairing, and ``equilibrium``, the game's equilibrium evader
 (:mod:`a2cm_phys.solve.nash`), which no team catches sooner on average than the game's value.
 
-Each is a :data:`~a2cm_phys.rollout.Policy`: ``policy(obs (B, obs_dim), rng) -> actions``.
+Each is a :data:`~a2cm_phys.training.rollout.Policy`: ``policy(obs (B, obs_dim), rng) -> actions``.
 
 A :class:`Matchup` is one pairing to play: the game (its evader set to the evader's kind),
 the pursuers' policy, and a learned evader's policy where the evader is one (scripted
@@ -34,11 +34,11 @@ from typing import Any
 
 import numpy as np
 
+from ..config import ConfigError, Physics, Scenario, load_scenario
+from ..envs.core import ACTION_DELTAS
+from ..solve.cache import OracleSolution, load_or_solve
+from ..training.rollout import Policy
 from .baselines import pursuit_actions
-from .config import ConfigError, Physics, Scenario, load_scenario
-from .envs.core import ACTION_DELTAS
-from .rollout import Policy
-from .solve.cache import OracleSolution, load_or_solve
 
 PURSUER_POLICIES = ("random", "pursuit", "oracle", "minimax")
 """The names :func:`pursuer_policy` knows."""
@@ -118,7 +118,7 @@ def oracle_policy(scenario: Scenario) -> Policy:
 
     Raises :class:`~a2cm_phys.config.ConfigError` when the oracle cannot solve it.
     """
-    from .solve import TooLargeError, UnsupportedError
+    from ..solve import TooLargeError, UnsupportedError
 
     try:
         oracle = OraclePolicy(grid_twin(scenario))
@@ -142,8 +142,8 @@ def minimax_policy(scenario: Scenario) -> Policy:
     evader is learned; the team does not depend on the evader). Raises
     :class:`~a2cm_phys.config.ConfigError` outside grid mode or where it cannot be solved.
     """
-    from .solve import TooLargeError, UnsupportedError
-    from .solve.tables import TablePolicy
+    from ..solve import TooLargeError, UnsupportedError
+    from ..solve.tables import TablePolicy
     from .sources import pursuer_source
 
     if scenario.mode != "grid":
@@ -201,7 +201,7 @@ def matchup(
     ``None``: the scenario's own evader, or the pursuers' run's evader when it is learned)
     in ``scenario``. Trained policies act greedily when ``greedy``.
     """
-    from .runs import load_trained_run, model_policy
+    from ..training.runs import load_trained_run, model_policy
 
     pursuer_run = (
         None if pursuers in PURSUER_POLICIES else _run(load_trained_run, "--pursuers", pursuers)
@@ -275,9 +275,9 @@ def check_layout(trained: Scenario, scenario: Scenario, run: str, model: Any = N
 def best_response_evader(scenario: Scenario, pursuers: str):
     """The evader's exact best response to ``pursuers`` (a run directory, ``random``,
     ``oracle`` or ``minimax``), as a table policy with the actors' interface (grids only)."""
-    from .solve import TooLargeError, UnsupportedError
-    from .solve.best_response import evader_best_response
-    from .solve.tables import TablePolicy
+    from ..solve import TooLargeError, UnsupportedError
+    from ..solve.best_response import evader_best_response
+    from ..solve.tables import TablePolicy
     from .sources import SourceError, pursuer_source
 
     if scenario.mode != "grid":
@@ -295,9 +295,9 @@ def equilibrium_evader(scenario: Scenario):
     """The game's equilibrium evader (:func:`~a2cm_phys.solve.cache.load_or_solve_value`: cached
     beside the oracle, or solved in minutes), as a table policy with the actors' interface
     (grids only)."""
-    from .solve import TooLargeError, UnsupportedError
-    from .solve.cache import load_or_solve_value
-    from .solve.tables import TablePolicy
+    from ..solve import TooLargeError, UnsupportedError
+    from ..solve.cache import load_or_solve_value
+    from ..solve.tables import TablePolicy
 
     if scenario.mode != "grid":
         raise ConfigError("--evader equilibrium: the game's value is solved on grids only")

@@ -22,11 +22,11 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from .config import Scenario, Train, load_scenario, load_train, parse_assignments
-from .config import preset as preset_values
-from .errors import UserError
-from .exitcodes import EXIT_INTERRUPTED, EXIT_NO_SPACE, EXIT_USAGE, OUT_OF_SPACE
-from .rundir import is_run_file
+from ..base.errors import UserError
+from ..base.exitcodes import EXIT_INTERRUPTED, EXIT_NO_SPACE, EXIT_USAGE, OUT_OF_SPACE
+from ..config import Scenario, Train, load_scenario, load_train, parse_assignments
+from ..config import preset as preset_values
+from ..training.rundir import is_run_file
 
 MAX_SEED = 2**64 - 1
 """Largest seed: seeds feed 64-bit generators."""
@@ -202,7 +202,7 @@ def add_scenario_options(
         help=f"override a {what} (one or more, repeatable; values are TOML: -2, flee, true)",
     )
     if train:
-        from .config import PRESETS
+        from ..config import PRESETS
 
         parser.add_argument(
             "--preset",

@@ -2,7 +2,7 @@
 response to themselves (``Train.descent_every``).
 
 Self-play's learned evader is far from a best response, so pursuers trained against it
-(simultaneously or against a pool, :mod:`a2cm_phys.opponents`) stay exploitable: an evader
+(simultaneously or against a pool, :mod:`a2cm_phys.training.opponents`) stay exploitable: an evader
 that plays the exact best response escapes them for good (``BENCHMARKS.md``). On a grid
 the exact best response is computable, and so is the gradient of its value in the
 pursuers' policy (:mod:`a2cm_phys.solve.descent`). With ``descent_every = K`` the
@@ -39,11 +39,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from .algos import ActorCritic
-from .config import ConfigError, Scenario, Train
+from ..algos import ActorCritic
+from ..config import ConfigError, Scenario, Train
+from ..solve.model import TooLargeError, UnsupportedError
+from ..solve.tables import joint_observations, model_table, uniform_table
 from .seeding import descent_rng, evader_descent_rng
-from .solve.model import TooLargeError, UnsupportedError
-from .solve.tables import joint_observations, model_table, uniform_table
 
 
 def check_descent(scenario: Scenario, cfg: Train) -> None:
@@ -61,7 +61,7 @@ def check_descent(scenario: Scenario, cfg: Train) -> None:
                 f" self-play, and scenario '{scenario.name}' is in {scenario.mode} mode with"
                 f" evader = '{scenario.evader}' (use grid_vs, or descent_every = 0)"
             )
-        from .solve.pursuer_step import check_size
+        from ..solve.pursuer_step import check_size
 
         try:
             check_size(scenario, "general")
@@ -85,7 +85,7 @@ def _check_evader_descent(scenario: Scenario) -> None:
             " pursuers' best response could end the episode by colliding, so the evader has"
             " no worst case to raise (use descent_teams = 'pursuers')"
         )
-    from .solve.model import GridModel
+    from ..solve.model import GridModel
 
     try:
         GridModel(scenario, evader_probs=uniform_table(scenario, 1))
@@ -111,7 +111,7 @@ class ExploitabilityDescent:
         seed: int,
         evader: ActorCritic | None = None,
     ) -> None:
-        from .solve.descent import EvaderGradient, WorstCaseGradient
+        from ..solve.descent import EvaderGradient, WorstCaseGradient
 
         self.scenario, self.model, self.steps = scenario, model, cfg.descent_steps
         self.gradient = WorstCaseGradient(scenario, cfg.gamma)

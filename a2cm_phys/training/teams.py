@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .algos import ActorCritic, Learner, make_model
-from .algos.shaping import ProgressShaping
-from .config import Scenario, Train, resolve_train
+from ..algos import ActorCritic, Learner, make_model
+from ..algos.shaping import ProgressShaping
+from ..config import Scenario, Train, resolve_train
 from .rollout import allocate_batch, allocate_evader_batch
 from .seeding import evader_weights_generator
 

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config import ConfigError, Scenario, load_scenario
+from ...config import ConfigError, Scenario, load_scenario
 from .plan import PlannedRun
 
 EVAL_SEED = 10_000
@@ -68,8 +68,8 @@ class RunResult:
 
 def training_figures(run_dir: Path) -> dict[str, float]:
     """Episodes, env steps and the last 10% (by env steps) of a run's log."""
-    from ..plot import episode_env_steps
-    from ..record import read_run
+    from ...analysis.figures import episode_env_steps
+    from ...record import read_run
 
     log = read_run(run_dir)
     steps = episode_env_steps(log)
@@ -89,9 +89,9 @@ def training_figures(run_dir: Path) -> dict[str, float]:
 def greedy_eval(run_dir: Path, episodes: int, scenario: Scenario | None = None) -> dict[str, Any]:
     """The run's pursuers, greedy, over ``episodes`` seeded episodes (a learned evader's
     scenario: against the random evader)."""
-    from ..evaluate import play
-    from ..policies import matchup
-    from ..runs import load_trained_run
+    from ...analysis.evaluation import play
+    from ...analysis.policies import matchup
+    from ...training.runs import load_trained_run
 
     trained = load_trained_run(run_dir)
     game_scenario = scenario or trained.scenario
@@ -152,8 +152,8 @@ def reference(
     key = json.dumps(["reference", scenario_name, overrides, episodes], sort_keys=True)
 
     def compute() -> dict[str, Any] | None:
-        from ..evaluate import optimum, play
-        from ..policies import pursuer_policy
+        from ...analysis.evaluation import optimum, play
+        from ...analysis.policies import pursuer_policy
 
         if scenario.mode == "grid":
             best = optimum(scenario)
@@ -180,8 +180,8 @@ def extra_reference(
     key = json.dumps(["policy", scenario_name, policy, overrides, episodes], sort_keys=True)
 
     def compute() -> dict[str, Any]:
-        from ..evaluate import play
-        from ..policies import pursuer_policy
+        from ...analysis.evaluation import play
+        from ...analysis.policies import pursuer_policy
 
         result = play(scenario, pursuer_policy(policy, scenario), episodes, seed=EVAL_SEED)
         return {"policy": f"{policy} (played)", "exact": False, **_result_dict(result)}
@@ -197,8 +197,8 @@ def exploit(run: PlannedRun, horizon: int | None) -> dict[str, Any]:
     best response to its pursuers (their worst-case capture time) and the pursuers' best
     response to its evader, over ``horizon`` steps (``None``: the scenario's max_steps;
     shorter is a truncated, lower value, ``truncated`` says so)."""
-    from ..exploitability import exploitability
-    from ..runs import load_trained_run
+    from ...training.exploitability import exploitability
+    from ...training.runs import load_trained_run
 
     trained = load_trained_run(run.run_dir)
     full = trained.scenario.max_steps
@@ -218,7 +218,7 @@ def _grid_game(scenario_name: str, horizon: int | None) -> tuple[Scenario, int, 
     """The grid game the solvers play for a scenario (its grid twin, :func:`grid_twin`)
     truncated at ``horizon`` (``None``: its ``max_steps``), the horizon, and whether it
     truncates."""
-    from ..policies import grid_twin
+    from ...analysis.policies import grid_twin
 
     scenario = load_scenario(scenario_name)
     h = min(horizon or scenario.max_steps, scenario.max_steps)
@@ -231,8 +231,8 @@ def oracle_worst_case(scenario_name: str, horizon: int | None, cache: Path) -> d
     key = json.dumps(["oracle-worst-case", scenario_name, h])
 
     def compute() -> dict[str, Any]:
-        from ..solve.best_response import evader_best_response
-        from ..sources import pursuer_source
+        from ...analysis.sources import pursuer_source
+        from ...solve.best_response import evader_best_response
 
         table = pursuer_source(twin, "oracle").table
         value = evader_best_response(twin, table).value_from_start
@@ -248,7 +248,7 @@ def minimax_bounds(scenario_name: str, horizon: int | None, cache: Path) -> dict
     key = json.dumps(["minimax-bounds", scenario_name, h])
 
     def compute() -> dict[str, Any]:
-        from ..solve.minimax import minimax_bounds as solve
+        from ...solve.minimax import minimax_bounds as solve
 
         bounds = solve(twin)
         return {"lower": bounds.lower_from_start, "upper": bounds.upper_from_start, "horizon": h}
@@ -276,8 +276,8 @@ def cross_play(
     """Mean episode length (capped at max_steps) and capture rate of every pursuer group
     against every evader group; groups are lists of run directories (seeds, paired by
     index when both sides are learned) or one named policy. Sampled policies, as trained."""
-    from ..evaluate import play
-    from ..policies import matchup
+    from ...analysis.evaluation import play
+    from ...analysis.policies import matchup
 
     scenario = load_scenario(scenario_name)
     rows = []

@@ -27,8 +27,8 @@ copies of the actors' weights (critics are not needed to act); they play through
 separate model per team, so the live models are never touched.
 
 The draws come from the pool's own generator, seeded from the run's seed
-(:func:`~a2cm_phys.seeding.opponent_rng`, beside the actions'
-:func:`~a2cm_phys.seeding.policy_rng`), and
+(:func:`~a2cm_phys.training.seeding.opponent_rng`, beside the actions'
+:func:`~a2cm_phys.training.seeding.policy_rng`), and
 :meth:`OpponentPool.state_dict` holds the snapshots and the generator, so ``--resume``
 stays bit for bit.
 
@@ -48,8 +48,8 @@ from typing import Any, Literal
 
 import torch
 
-from .algos import ActorCritic
-from .config import ConfigError, Scenario, Train
+from ..algos import ActorCritic
+from ..config import ConfigError, Scenario, Train
 from .seeding import opponent_rng
 
 Side = Literal["pursuers", "evader"]

@@ -17,12 +17,16 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import json
 import os
 import re
 from collections.abc import Iterator
+from datetime import datetime
 from pathlib import Path
 
-from .errors import UserError
+from ..base.errors import UserError
+from ..base.versions import library_versions
+from ..config import Scenario, Train, to_dict
 
 CONFIG_NAME = "config.json"
 """The resolved scenario and training config, the commands and library versions."""
@@ -158,3 +162,37 @@ def remove_stray_temps(run_dir: str | Path) -> list[str]:
         tmp.unlink(missing_ok=True)
         removed.append(tmp.name)
     return sorted(removed)
+
+
+def write_config(run_dir: Path, scenario: Scenario, cfg: Train, command: str) -> None:
+    """Write ``config.json`` (atomically): the resolved scenario and training config, the
+    command and the library versions."""
+    config = {
+        "scenario": to_dict(scenario),
+        "train": to_dict(cfg),
+        "command": command,
+        "created": datetime.now().isoformat(timespec="seconds"),
+        "versions": library_versions(),
+    }
+    write_atomic(Path(run_dir) / CONFIG_NAME, json.dumps(config, indent=2) + "\n")
+
+
+def append_session(
+    run_dir: Path, command: str, update: int, scenario: Scenario, cfg: Train
+) -> None:
+    """Add a resumed session (its command, update and library versions) to ``config.json``,
+    with the training config it runs with; a missing or damaged ``config.json`` is rebuilt
+    from ``scenario`` (the checkpoint's)."""
+    path = run_dir / CONFIG_NAME
+    try:
+        config = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):  # missing or damaged: the checkpoint has the config
+        config = None
+    if not isinstance(config, dict):
+        config = {"scenario": to_dict(scenario), "rebuilt_from_checkpoint": True}
+    config["train"] = to_dict(cfg)
+    resumed = {"command": command, "at_update": update, "versions": library_versions()}
+    if not isinstance(config.get("resumed"), list):
+        config["resumed"] = []
+    config["resumed"].append(resumed)
+    write_atomic(path, json.dumps(config, indent=2) + "\n")

@@ -1,0 +1,329 @@
+"""``python -m a2cm_phys.oracle``: the exact optimum of a grid scenario, cached, and as a policy.
+
+The grid game is solved by value iteration over the joint state (every pursuer's cell and
+the evader's) with :mod:`a2cm_phys.solve`. The objective is the scenario's own expected
+total raw reward until the episode terminates, undiscounted: with the step penalty alone
+(experiment 1) that is minus the expected number of steps to capture; with collision
+penalties it includes them, and in ``terminate`` mode a collision ends the episode.
+Truncation at ``max_steps`` is ignored by the optimisation (its probability is reported).
+
+The solution is cached as ``<cache dir>/<key>.npz``, the key a hash of the fields that
+define the game (:mod:`a2cm_phys.solve.cache`); the cache directory defaults to
+``$XDG_CACHE_HOME/a2cm_phys/oracle`` (``~/.cache/a2cm_phys/oracle``).
+:class:`a2cm_phys.analysis.policies.OraclePolicy` plays the optimal policy from observations, so
+evaluations and replays can put learned policies next to it.
+
+``--best-response evader|pursuers`` solves one team's exact best response to the other's
+fixed policy (:mod:`a2cm_phys.solve.best_response`); ``--game-value`` brackets the game's
+value when both teams play their best (:mod:`a2cm_phys.solve.nash`).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..analysis.sources import (
+    EVADER_NAMES,
+    PURSUER_NAMES,
+    SourceError,
+    evader_source,
+    is_run,
+    pursuer_source,
+    run_scenario,
+)
+from ..config import Scenario, build, merge_overrides, to_dict
+from ..solve import TooLargeError, UnsupportedError
+from ..solve.best_response import (
+    TOLERANCE,
+    BestResponse,
+    Outcome,
+    evader_best_response,
+    evaluate_tables,
+    pursuers_best_response,
+)
+from ..solve.cache import OracleSolution, load_or_solve, load_or_solve_value
+from ..solve.minimax import MinimaxBounds, minimax_bounds
+from ..solve.pursuer_step import check_size
+from ..solve.tables import SCRIPTED_EVADERS, uniform_table
+from .options import (
+    Parser,
+    UsageError,
+    add_scenario_options,
+    positive_float,
+    run_cli,
+    scenario_from_args,
+    split_assignments,
+    writable_dir,
+)
+
+if TYPE_CHECKING:  # the solver imports torch: only when --game-value asks for it
+    from ..solve.nash import GameValue
+
+# --------------------------------------------------------------------------- command
+
+
+def _report(sol: OracleSolution) -> str:
+    sc, meta = sol.scenario, sol.meta
+    start = sol.start_positions()
+    dist = sol.distribution()
+    cells = " ".join(f"({x},{y})" for x, y in start[:-1])
+    state = "loaded from" if sol.cached else ("saved to" if sol.path else "not cached")
+    peak = meta.get("peak_bytes")
+    lines = [
+        f"oracle: {sc.name}: {sc.size}x{sc.size} grid, {sc.pursuers} pursuer(s), "
+        f"{sc.actions} actions, {sc.evader} evader, collisions {sc.collisions.mode}",
+        f"  solve: {meta['states']:,} joint states x {meta['joint_actions']} joint actions, "
+        f"{meta['sweeps']} sweeps (+{meta['qualitative_sweeps']} reachability), residual "
+        f"{meta['residual']:.1e}, {meta['seconds']:.1f} s"
+        + (f", peak {peak / 2**20:.0f} MiB" if peak else ""),
+        f"  check: greedy policy replayed through GridRules.apply matches the optimum to "
+        f"{meta['policy_check']:.1e}",
+        f"  cache: {state} {sol.path}" if sol.path else f"  cache: {state}",
+    ]
+    if meta["losing_states"]:
+        lines.append(f"  {meta['losing_states']:,} states from which capture cannot be forced")
+    lines += [
+        f"  start: pursuers {cells}, evader ({start[-1][0]},{start[-1][1]})",
+        f"  optimal expected return: {sol.optimal_return(start):.6f}",
+        f"  expected steps to capture: {sol.expected_capture_steps(start):.6f}",
+    ]
+    if not np.isfinite(sol.optimal_return(start)):
+        lines.append("  capture cannot be forced from the start: no finite optimum")
+        return "\n".join(lines)
+    if sc.collisions.mode != "off":
+        lines.append(
+            f"  P(capture) {dist.p_capture:.6f}, P(ended by collision) "
+            f"{dist.collision.sum():.2e}, expected collisions "
+            f"{float(sol.collisions[sol.index(start)]):.2e}"
+        )
+    median, p95 = dist.quantile(0.5), dist.quantile(0.95)
+    lines.append(
+        f"  capture steps: mean {dist.mean_length():.6f}, median {median:g}, p95 {p95:g}, "
+        f"p99 {dist.quantile(0.99):g}, P(truncated at {sc.max_steps}) {dist.truncated:.1e}"
+    )
+    top = int(min(dist.quantile(0.999), 20)) if np.isfinite(dist.quantile(0.999)) else 20
+    cdf = ", ".join(f"{k}: {dist.cdf(k):.4f}" for k in range(1, top + 1))
+    lines.append(f"  P(capture <= k): {cdf}")
+    return "\n".join(lines)
+
+
+def _outcome_lines(out: Outcome, start: int, horizon: int, terminate: bool) -> list[str]:
+    lines = [f"    P(capture within {horizon} steps) {out.p_capture[start]:.6f}"]
+    if terminate:
+        lines[0] += f", P(ended by a collision) {out.p_end[start] - out.p_capture[start]:.6f}"
+    lines[0] += f", P(truncated) {1.0 - out.p_end[start]:.6f}"
+    stop = "all steps" if out.iterations == horizon else "stopped early"
+    lines.append(
+        f"    backward induction: {out.iterations} of {horizon} steps ({stop}, error bound "
+        f"{out.error_bound:.1e}), {out.kind} table, {out.seconds:.1f} s"
+    )
+    return lines
+
+
+def _scenario_line(sc: Scenario) -> str:
+    return (
+        f"oracle: {sc.name}: {sc.size}x{sc.size} grid, {sc.pursuers} pursuer(s), "
+        f"{sc.actions} actions, collisions {sc.collisions.mode}, max_steps {sc.max_steps}"
+    )
+
+
+def _evader_report(sc: Scenario, label: str, br: BestResponse, random: Outcome) -> str:
+    """The evader's best response against a pursuer policy, and the random evader's value."""
+    start, terminate = br.start, sc.collisions.mode == "terminate"
+    worst, typical = br.value_from_start, float(random.values[start])
+    what = "episode length (capture or collision)" if terminate else "capture time"
+    lines = [
+        _scenario_line(sc),
+        f"  pursuers: {label}",
+        "  evader's best response (maximises the expected episode length, truncated at "
+        f"{sc.max_steps}):",
+        f"    worst-case {what}: {worst:.6f}",
+        *_outcome_lines(br.outcome, start, sc.max_steps, terminate),
+        "  random evader for comparison:",
+        f"    expected {what}: {typical:.6f}",
+        *_outcome_lines(random, start, sc.max_steps, terminate),
+    ]
+    if typical > 0:
+        lines.append(f"  exploitability: the best response lasts {worst / typical:.2f}x as long")
+    return "\n".join(lines)
+
+
+def _pursuers_report(sc: Scenario, label: str, br: BestResponse) -> str:
+    """The pursuers' best response (the oracle against the evader) from the start."""
+    meta, terminate = br.meta, sc.collisions.mode == "terminate"
+    lines = [
+        _scenario_line(sc),
+        f"  evader: {label}",
+        "  pursuers' best response (the oracle solved against this evader):",
+        f"    expected capture time: {br.value_from_start:.6f}",
+        *_outcome_lines(br.outcome, br.start, sc.max_steps, terminate),
+    ]
+    if "sweeps" in meta:
+        lines.append(f"    oracle: {meta['sweeps']} sweeps, {meta['dp_seconds']:.1f} s")
+    if meta.get("losing_states"):
+        lines.append(f"    {meta['losing_states']:,} states from which capture cannot be forced")
+    return "\n".join(lines)
+
+
+def _bounds_report(bounds: MinimaxBounds) -> str:
+    """The bounds on the game's minimax value that come with the minimax team."""
+    k_lo, k_hi = bounds.iterations
+    return "\n".join(
+        [
+            "  the game's minimax capture time (both teams at their best, mixed strategies),"
+            " from the start:",
+            f"    at least {bounds.lower_from_start:g} (the evader moving first,"
+            f" {k_lo} steps of recursion): no team's worst case is lower",
+            f"    at most {bounds.upper_from_start:g} (the pursuers moving first,"
+            f" {k_hi} steps): the minimax team's worst case; {bounds.seconds:.1f} s",
+        ]
+    )
+
+
+def _value_report(sc: Scenario, value: GameValue, bounds: MinimaxBounds) -> str:
+    """The game's value bracketed (:mod:`.solve.nash`), beside the perfect-information
+    games' bounds."""
+    return "\n".join(
+        [
+            _scenario_line(sc),
+            "  the game's value (both teams at their best, mixed strategies), from the start:",
+            f"    at least {value.lower:.6f}: the equilibrium evader's worst case (the team's"
+            " best response to it)",
+            f"    at most {value.upper:.6f}: the equilibrium team's worst case (the evader's"
+            " best response; the team draws its moves jointly)",
+            f"    from {value.sweeps} Shapley sweeps, each state's game by regret matching+;"
+            f" {value.seconds:.0f} s{' (cached)' if value.cached else ''}",
+            f"  the perfect-information games: at least {bounds.lower_from_start:g} (the"
+            f" evader moving first), at most {bounds.upper_from_start:g} (the pursuers"
+            " moving first)",
+        ]
+    )
+
+
+def _game_value(args) -> int:
+    """``--game-value``: solve, print, exit status."""
+    args.scenario = args.scenario or "grid"
+    sc = scenario_from_args(args, train=False)
+    try:
+        value = load_or_solve_value(sc, args.cache_dir, use_cache=not args.no_cache)
+        print(_value_report(sc, value, minimax_bounds(sc)))
+    except (TooLargeError, UnsupportedError) as err:
+        raise UsageError(str(err)) from None
+    return 0
+
+
+def _best_response_scenario(args) -> Scenario:
+    """``--scenario`` with ``--set``; without ``--scenario``, a run directory's own."""
+    names = PURSUER_NAMES if args.best_response == "evader" else EVADER_NAMES
+    spec = args.pursuers if args.best_response == "evader" else args.evader
+    if args.scenario is None and spec is not None and is_run(spec, names):
+        trained = run_scenario(spec, names)
+        overrides, train_set = split_assignments(args.set)
+        if train_set:
+            raise UsageError(f"--set train.{next(iter(train_set))}: this command does not train")
+        return build(Scenario, merge_overrides(to_dict(trained), overrides), "--set")
+    args.scenario = args.scenario or "grid"
+    return scenario_from_args(args, train=False)
+
+
+def _best_response(args) -> int:
+    """``--best-response evader|pursuers``: solve, print, exit status."""
+    cache = {"cache_dir": args.cache_dir, "use_cache": not args.no_cache}
+    try:
+        sc = _best_response_scenario(args)
+        if args.best_response == "evader":
+            spec = args.pursuers or "oracle"
+            kinds = {"oracle": "deterministic", "minimax": "deterministic", "random": "product"}
+            check_size(sc, kinds.get(spec, "general"))
+            source = pursuer_source(sc, spec, **cache)
+            br = evader_best_response(sc, source.table, args.tol)
+            random = evaluate_tables(sc, source.table, uniform_table(sc, 1), args.tol)
+            print(_evader_report(sc, source.label, br, random))
+            if isinstance(source.solution, MinimaxBounds):
+                print(_bounds_report(source.solution))
+            return 0
+        spec = args.evader or sc.evader
+        if spec not in SCRIPTED_EVADERS and spec == sc.evader:
+            raise UsageError(f"the scenario's evader is {spec!r}: name one with --evader")
+        check_size(sc, "deterministic")
+        source = evader_source(sc, spec, **cache)
+        solved = None if source.solution is None else source.solution.policy
+        br = pursuers_best_response(sc, source.table, args.tol, joint_policy=solved)
+        print(_pursuers_report(sc, source.label, br))
+        return 0
+    except (TooLargeError, UnsupportedError, SourceError) as err:
+        raise UsageError(str(err)) from None
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Solve (or load) a grid scenario's optimum and print its statistics; exit code."""
+    return run_cli(_main, argv)
+
+
+def _main(argv: Sequence[str]) -> int:
+    parser = Parser(
+        prog="python -m a2cm_phys.oracle",
+        description="Exact optimal pursuit policy of a grid scenario (value iteration).",
+    )
+    add_scenario_options(parser, default=None, train=False)
+    parser.add_argument("--cache-dir", type=Path, default=None, help="cache directory")
+    parser.add_argument("--no-cache", action="store_true", help="neither read nor write cache")
+    parser.add_argument(
+        "--best-response",
+        choices=["evader", "pursuers"],
+        help="solve that team's exact best response to the other team's fixed policy",
+    )
+    parser.add_argument(
+        "--game-value",
+        action="store_true",
+        help="bracket the game's value with mixed strategies (both teams at their best) by"
+        " the exact worst cases of an equilibrium evader and team; minutes on 5x5",
+    )
+    parser.add_argument(
+        "--pursuers",
+        metavar="random|oracle|minimax|RUN_DIR",
+        help="with --best-response evader: the pursuers' policy (default oracle; minimax:"
+        " the team optimal when the evader sees its move, with bounds on the game's value)",
+    )
+    parser.add_argument(
+        "--evader",
+        metavar="random|flee|static|equilibrium|RUN_DIR",
+        help="with --best-response pursuers: the evader's policy (default the scenario's;"
+        " equilibrium: the game's, see --game-value)",
+    )
+    parser.add_argument(
+        "--tol",
+        type=positive_float,
+        default=TOLERANCE,
+        help=f"error bound that stops the backward induction early (default {TOLERANCE:g})",
+    )
+    args = parser.parse_args(argv)
+    if args.cache_dir is not None and not args.no_cache:
+        writable_dir(args.cache_dir, "--cache-dir")
+    if args.pursuers is not None and args.best_response != "evader":
+        raise UsageError("--pursuers goes with --best-response evader")
+    if args.evader is not None and args.best_response != "pursuers":
+        raise UsageError("--evader goes with --best-response pursuers")
+    if args.game_value and args.best_response:
+        raise UsageError("--game-value and --best-response are separate questions: give one")
+    if args.game_value:
+        return _game_value(args)
+    if args.best_response:
+        return _best_response(args)
+    args.scenario = args.scenario or "grid"
+    scenario = scenario_from_args(args, train=False)
+    try:
+        sol = load_or_solve(scenario, args.cache_dir, use_cache=not args.no_cache)
+    except (TooLargeError, UnsupportedError) as err:
+        raise UsageError(str(err)) from None
+    print(_report(sol))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

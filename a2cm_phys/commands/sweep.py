@@ -1,0 +1,197 @@
+"""Sweeps of scenarios × algorithms × seeds, each run a Ray task (or sequential without Ray).
+
+    python -m a2cm_phys.sweep --scenarios grid,grid_collision --algos a2c,a2cm --seeds 0-4
+
+Each run is exactly ``python -m a2cm_phys.train`` with that scenario, algorithm and seed,
+written to its own run directory ``<logdir>/<scenario>-<algo>-s<seed>/`` (config,
+checkpoint, MCAP log, summary), so a sweep's numbers equal those of the runs done one by
+one. Re-running a sweep skips finished runs and resumes unfinished ones from their
+checkpoints, but only runs whose resolved scenario and training config are exactly the
+requested ones: a run directory holding another configuration is an error naming the
+difference, found before anything runs. A failing run is retried once and reported while the
+others go on. Each run holds its run directory's lock
+(:func:`a2cm_phys.training.rundir.run_lock`) while it runs: a run that another process
+writes (a ``train``, or a second sweep on the same ``--logdir``) is reported busy and left
+alone, so no run is ever written twice at once. Ctrl-C or SIGTERM stop the sweep cleanly:
+running runs save their checkpoints, the exit status is 130 or 143, and the same command
+resumes. Without ``--address`` Ray starts locally on this machine's cores; ``--address
+auto`` or ``ray://host:10001`` uses an existing cluster. Without Ray installed (``pip
+install -e ".[cluster]"``) the runs go one after another in this process."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from collections import Counter
+from collections.abc import Sequence
+from pathlib import Path
+
+from ..config import (
+    ConfigError,
+    load_scenario,
+)
+from ..study.sweep import (
+    Outcome,
+    RunSpec,
+    _stop_signals,
+    check_reusable,
+    format_table,
+    run_all,
+    summarise,
+    write_summary,
+)
+from .options import (
+    Parser,
+    add_logdir,
+    add_scenario_options,
+    check_device,
+    int_range,
+    positive_float,
+    run_cli,
+    split_assignments,
+    train_values,
+    writable_dir,
+)
+
+_MAX_SEEDS = 10_000
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``0-4`` → 0..4; ``1,3,7`` → those; both may mix (``0-2,9``); a seed given twice, a
+    negative one or one beyond 64 bits is a :class:`ConfigError`."""
+    from .options import MAX_SEED
+
+    seeds: list[int] = []
+    for part in text.split(","):
+        lo, _, hi = part.strip().partition("-")
+        try:
+            first, last = int(lo), int(hi or lo)
+        except ValueError:
+            raise ConfigError(f"--seeds: '{text}' is not like 0-4 or 1,3,7") from None
+        if last - first >= _MAX_SEEDS or len(seeds) >= _MAX_SEEDS:
+            raise ConfigError(f"--seeds: '{text}': too many seeds (at most {_MAX_SEEDS:,})")
+        seeds += range(first, last + 1)
+    if not seeds:
+        raise ConfigError(f"--seeds: '{text}' gives no seed")
+    repeated = sorted(s for s, n in Counter(seeds).items() if n > 1)
+    if repeated:
+        raise ConfigError(f"--seeds: seed {repeated[0]} is given twice in '{text}'")
+    if max(seeds) > MAX_SEED:
+        raise ConfigError(f"--seeds: {max(seeds)} is beyond 64 bits")
+    return seeds
+
+
+def _names(text: str, option: str) -> list[str]:
+    names = [x.strip() for x in text.split(",") if x.strip()]
+    if not names:
+        raise ConfigError(f"{option}: '{text}' names nothing")
+    repeated = sorted({x for x in names if names.count(x) > 1})
+    if repeated:
+        raise ConfigError(f"{option}: '{repeated[0]}' is given twice")
+    return names
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``python -m a2cm_phys.sweep`` argument parser."""
+    p = Parser(prog="python -m a2cm_phys.sweep", description=__doc__.split("\n")[0])
+    p.add_argument("--scenarios", required=True, help="comma-separated scenario names or paths")
+    p.add_argument("--algos", default="a2c,a2cm", help="comma-separated: a2c, a2cm")
+    p.add_argument("--seeds", default="0-4", help="e.g. 0-4 or 1,3,7")
+    add_logdir(p, "logs/sweep", "where the run directories go (--sweep-dir: the old spelling)")
+    p.add_argument("--address", help="Ray cluster address (auto, ray://host:10001)")
+    p.add_argument("--cpus-per-run", type=positive_float, default=1.0)
+    p.add_argument("--sequential", action="store_true", help="no Ray, even if installed")
+    add_scenario_options(p, scenario=False)
+    p.add_argument("--no-record", action="store_true", help="no MCAP episode logs")
+    p.add_argument("--log-every", type=int_range(0), default=1)
+    return p
+
+
+def plan(args: argparse.Namespace) -> list[RunSpec]:
+    """The runs of a sweep, validated (also against the run directories already in
+    ``--logdir``) before anything starts."""
+    overrides, _ = split_assignments(args.set)
+    train = train_values(args)
+    scenarios = _names(args.scenarios, "--scenarios")
+    algos = _names(args.algos, "--algos")
+    seeds = parse_seeds(args.seeds)
+    specs, names = [], {}
+    for scenario in scenarios:
+        load_scenario(scenario, overrides)
+        for algo in algos:
+            for seed in seeds:
+                spec = RunSpec(
+                    scenario, algo, seed, train, overrides, not args.no_record, args.log_every
+                )
+                _, cfg = spec.resolve()
+                if spec.name in names:
+                    raise ConfigError(
+                        f"--scenarios: '{names[spec.name]}' and '{scenario}' would share the run"
+                        f" directory {spec.name}"
+                    )
+                names[spec.name] = scenario
+                specs.append(spec)
+    check_device(cfg.device)
+    sweep_dir = writable_dir(args.logdir, "--logdir")  # refuses '' and links to nothing
+    for spec in specs:
+        check_reusable(spec, sweep_dir)
+    return specs
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m a2cm_phys.sweep``; returns the exit status."""
+    return run_cli(_main, argv)
+
+
+def _main(argv: Sequence[str]) -> int:
+    args = build_parser().parse_args(argv)
+    with _stop_signals() as received:
+        try:
+            return _sweep(args)
+        except KeyboardInterrupt as stop:
+            signum = received.behind(stop)
+            print(
+                f"interrupted ({signal.Signals(signum).name}): finished runs are intact, stopped"
+                " ones resume from their checkpoints; run the same command to resume",
+                file=sys.stderr,
+            )
+            return 128 + signum
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    specs = plan(args)
+    sweep_dir = Path(args.logdir)
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(specs), desc="runs", unit="run", disable=None)
+
+    def on_done(o: Outcome) -> None:
+        bar.write(f"{o.spec.name}: {o.describe()}")
+        bar.update()
+
+    try:
+        outcomes, _ = run_all(
+            specs, sweep_dir, on_done, args.address, args.cpus_per_run, args.sequential
+        )
+    finally:
+        bar.close()
+    rows = summarise(outcomes)
+    written = write_summary(rows, outcomes, sweep_dir)
+    if rows:
+        print(format_table(rows))
+    failed = [o for o in outcomes if o.error]
+    for o in failed:
+        print(f"FAILED {o.spec.name} after {o.attempts} attempts: {o.error}", file=sys.stderr)
+    for o in outcomes:
+        if o.busy is not None:
+            print(f"BUSY {o.spec.name}: {o.busy}; not run", file=sys.stderr)
+    print(f"summary: {', '.join(str(p) for p in written)}")
+    if failed and len(failed) == len(outcomes):
+        print(f"error: every run failed ({len(failed)} of {len(outcomes)})", file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

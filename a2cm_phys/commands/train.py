@@ -1,0 +1,326 @@
+"""Train A2C or A2CM on a scenario: ``python -m a2cm_phys.train --scenario grid``.
+
+One trainer for both algorithms; only the model differs (``make_model``: one critic for
+A2CM, N for A2C). Each update collects ``batch_size`` steps (``batch_size / num_envs`` per
+game) and takes one learner step. A run lives in ``<logdir>/<scenario>-<algo>-s<seed>-<time>/``:
+
+- ``config.json``: the resolved scenario and training config, the command line(s) and the
+  library versions of each session;
+- ``checkpoint.pt``: everything to continue exactly (:meth:`Trainer.checkpoint_state`),
+  written atomically every ``checkpoint_seconds`` (or ``checkpoint_every`` updates), on
+  Ctrl-C and at the end;
+- ``summary.json``: episode counts, mean length, collisions, captures, time, speed;
+- ``episodes.mcap``: the episode log (:mod:`a2cm_phys.record`); each resumed session adds
+  a part ``episodes-from-NNNNNN.mcap`` (see :mod:`a2cm_phys.record.parts`).
+
+Ctrl-C and SIGTERM stop at the end of the update with a checkpoint (exit 130 or 143), a
+dead physics worker with a checkpoint at the last whole update (exit 4); each prints the
+command that resumes the run.
+
+``--resume RUN_DIR`` continues bit for bit in grid mode (an interrupted and resumed run
+ends with the same weights and episode statistics as an uninterrupted one). In physics
+mode the games running at the checkpoint are restarted on resume unless the physics core
+can save its state (see :meth:`a2cm_phys.envs.vector.VectorEnv.state`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import shutil
+import signal
+import sys
+from collections.abc import Sequence
+from contextlib import ExitStack
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from ..base.exitcodes import EXIT_INTERRUPTED, EXIT_NO_SPACE, EXIT_NONFINITE, EXIT_WORKER_DIED
+from ..config import Scenario, Train, resolve_train
+from ..training.rundir import (
+    CHECKPOINT_NAME,
+    CONFIG_NAME,
+    LOCK_NAME,
+    LOG_PART,
+    RUN_FILES,
+    append_session,
+    remove_stray_temps,
+    run_lock,
+    write_config,
+)
+from ..training.rundir import PREVIOUS_CHECKPOINT_NAME as PREVIOUS_NAME
+from ..training.seeding import policy_rng
+from ..training.trainer import Trainer, check_run
+from .options import (
+    SEED,
+    Parser,
+    UsageError,
+    add_scenario_options,
+    int_range,
+    run_cli,
+    scenario_from_args,
+    train_from_args,
+    writable_dir,
+)
+
+__all__ = [
+    "EXIT_INTERRUPTED",
+    "EXIT_NONFINITE",
+    "EXIT_NO_SPACE",
+    "EXIT_WORKER_DIED",
+    "Trainer",
+    "build_parser",
+    "main",
+    "policy_rng",
+]
+
+# ---------------------------------------------------------------------- command line
+
+_TRAIN_FLAGS = (
+    "algo", "num_envs", "updates", "batch_size", "seed", "lr",
+    "reward_scale", "max_grad_norm", "device", "threads", "workers",
+)  # fmt: skip
+
+_COUNT = int_range(1)
+_EVERY = int_range(0)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``python -m a2cm_phys.train`` argument parser."""
+    p = Parser(
+        prog="python -m a2cm_phys.train",
+        description="Train A2CM (one shared critic) or A2C (N actor-critic pairs).",
+    )
+    add_scenario_options(p)
+    p.add_argument("--algo", choices=["a2cm", "a2c"])
+    p.add_argument("--num-envs", type=_COUNT, help="parallel games (1 = the paper's setting)")
+    p.add_argument(
+        "--updates",
+        type=_COUNT,
+        help="gradient updates (5000; continuous control: 2,000,000 steps' worth, 4,000,000 flee)",
+    )
+    p.add_argument(
+        "--batch-size",
+        type=_COUNT,
+        help="steps per update over all games (128; continuous, fleeing evader: 512)",
+    )
+    p.add_argument("--seed", type=SEED)
+    p.add_argument("--lr", type=float)
+    p.add_argument("--reward-scale", type=float)
+    p.add_argument(
+        "--max-grad-norm", type=float, help="0 disables clipping (0; continuous control: 0.5)"
+    )
+    p.add_argument("--device", help="torch device: cpu (default), cuda, cuda:1, mps")
+    p.add_argument("--threads", type=_COUNT, help="torch threads (default 1)")
+    p.add_argument("--workers", type=_COUNT, help="physics: processes stepping the games (1)")
+    p.add_argument("--logdir", default="logs", help="parent folder of run directories")
+    p.add_argument("--run-dir", help="exact run directory (instead of one under --logdir)")
+    p.add_argument("--resume", metavar="RUN_DIR", help="continue a run (--updates may extend it)")
+    p.add_argument(
+        "--log-every", type=_EVERY, help="log every K-th episode's trajectory (1; 0: none)"
+    )
+    p.add_argument("--scene-every", type=_EVERY, help="Foxglove scenes every K episodes (0: off)")
+    p.add_argument("--no-record", action="store_true", help="no MCAP episode log")
+    p.add_argument("--checkpoint-every", type=_EVERY, default=0, help="also save every K updates")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+def make_run_dir(logdir: str | Path, scenario: Scenario, cfg: Train) -> Path:
+    """Create ``<logdir>/<scenario>-<algo>-s<seed>-<YYYYmmdd-HHMMSS>[-k]/`` and return it."""
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+    logdir = Path(logdir)
+    base = logdir / f"{scenario.name}-{cfg.algo}-s{cfg.seed}-{stamp}"
+    if base.resolve().parent != logdir.resolve():  # config.check_limits forbids such names
+        raise UsageError(f"scenario name {scenario.name!r} would leave --logdir {logdir}")
+    for k in range(1000):
+        path = base if k == 0 else base.with_name(f"{base.name}-{k}")
+        try:
+            path.mkdir(parents=True)
+            return path
+        except FileExistsError:
+            if not (path.exists() or path.is_symlink()):  # a parent is in the way, not a run
+                raise UsageError(f"--logdir {logdir}: cannot create {path}") from None
+            continue
+    raise FileExistsError(f"{base}: too many runs with this name")
+
+
+def check_new_run_dir(run_dir: Path) -> None:
+    """A :class:`UsageError` unless ``run_dir`` can take a new run: it must not hold a run
+    (a checkpoint: ``--resume`` it) nor a run's files (which a new run would overwrite)."""
+    if run_dir.exists() and not run_dir.is_dir():
+        raise UsageError(f"--run-dir {run_dir}: is a file")
+    if (run_dir / CHECKPOINT_NAME).exists():
+        raise UsageError(f"--run-dir {run_dir}: holds a run already (use --resume)")
+    found = [f for f in RUN_FILES if (run_dir / f).exists()]
+    found += sorted(p.name for p in run_dir.glob("episodes*.mcap") if LOG_PART.fullmatch(p.name))
+    if found:
+        raise UsageError(
+            f"--run-dir {run_dir}: holds {', '.join(found)} of an earlier run but no checkpoint;"
+            " a new run would overwrite them (choose another folder or move them away)"
+        )
+    writable_dir(run_dir, "--run-dir")
+
+
+def _check_run_files(run_dir: Path) -> None:
+    """A :class:`UsageError` if one of the run's files is not a file (it could not be
+    written at the end of the session)."""
+    for name in RUN_FILES:
+        path = run_dir / name
+        if path.exists() and not path.is_file():
+            raise UsageError(f"--resume {run_dir}: {path} is not a file (move it away)")
+
+
+def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Trainer:
+    """The trainer of a new or resumed run, with the run's lock entered into ``held``."""
+    options = {
+        "checkpoint_every": args.checkpoint_every,
+        "progress": not args.no_progress and sys.stderr.isatty(),
+    }
+    if args.resume:
+        fixed = [f"--{k.replace('_', '-')}" for k in _TRAIN_FLAGS if k != "updates"]
+        given = [f for f in fixed if getattr(args, f[2:].replace("-", "_")) is not None]
+        given += ["--scenario"] * bool(args.scenario) + ["--set"] * bool(args.set)
+        given += ["--run-dir"] * bool(args.run_dir) + ["--preset"] * (args.preset is not None)
+        if given:
+            raise UsageError(f"--resume: {', '.join(given)} cannot change when resuming")
+        run = Path(args.resume)
+        run_dir = run if run.is_dir() else run.parent
+        if not run_dir.is_dir():
+            raise UsageError(f"--resume {run}: no such run directory")
+        if run.is_file() and run.name != CHECKPOINT_NAME:
+            raise UsageError(f"--resume {run}: not a run directory or its {CHECKPOINT_NAME}")
+        if not any((run_dir / n).is_file() for n in (CONFIG_NAME, CHECKPOINT_NAME, PREVIOUS_NAME)):
+            raise UsageError(f"--resume {run_dir}: no checkpoint (and no config.json): not a run")
+        writable_dir(run_dir, "--resume")
+        held.enter_context(run_lock(run_dir))
+        remove_stray_temps(run_dir)
+        _check_run_files(run_dir)
+        trainer = Trainer.resume(
+            args.resume,
+            args.updates,
+            record=False if args.no_record else None,
+            log_every=args.log_every,
+            scene_every=args.scene_every,
+            **options,
+        )
+        append_session(trainer.run_dir, command, trainer.update, trainer.scenario, trainer.cfg)
+        return trainer
+    if not args.scenario:
+        raise UsageError("--scenario is required (or --resume RUN_DIR)")
+    scenario = scenario_from_args(args)
+    cfg = train_from_args(args, {k: getattr(args, k) for k in _TRAIN_FLAGS})
+    cfg = resolve_train(scenario, cfg)  # what config.json records and the learner sees
+    check_run(scenario, cfg)  # before the run directory exists
+    if args.run_dir:
+        run_dir = Path(args.run_dir)
+        if run_dir.exists() and not run_dir.is_dir():
+            raise UsageError(f"--run-dir {run_dir}: is a file")
+        writable_dir(run_dir, "--run-dir")
+        existed = run_dir.exists()
+        run_dir.mkdir(parents=True, exist_ok=True)
+        lock_existed = (run_dir / LOCK_NAME).exists()
+        held.enter_context(run_lock(run_dir))  # before looking: two new runs race here
+        try:
+            check_new_run_dir(run_dir)
+        except UsageError:  # refused: leave the folder as it was
+            if not lock_existed:
+                (run_dir / LOCK_NAME).unlink(missing_ok=True)
+            raise
+    else:
+        writable_dir(args.logdir, "--logdir")
+        run_dir, existed = make_run_dir(args.logdir, scenario, cfg), False
+        held.enter_context(run_lock(run_dir))
+    try:
+        write_config(run_dir, scenario, cfg, command)
+        return Trainer(
+            scenario,
+            cfg,
+            run_dir,
+            record=not args.no_record,
+            log_every=1 if args.log_every is None else args.log_every,
+            scene_every=args.scene_every or 0,
+            **options,
+        )
+    except BaseException:  # e.g. no memory for the games: leave no half-made run behind
+        (run_dir / CONFIG_NAME).unlink(missing_ok=True)
+        if not existed:
+            shutil.rmtree(run_dir, ignore_errors=True)
+        raise
+
+
+def _print_summary(summary: dict[str, Any]) -> None:
+    for key, value in summary.items():
+        text = f"{value:.4g}" if isinstance(value, float) else value
+        print(f"{key:>24}: {text}")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m a2cm_phys.train``; returns the exit status."""
+    return run_cli(_main, argv)
+
+
+def _main(argv: Sequence[str]) -> int:
+    args = build_parser().parse_args(argv)
+    command = shlex.join(["python", "-m", "a2cm_phys.train", *argv])
+    with ExitStack() as held:  # the run's lock, for the whole session
+        trainer = _open_run(args, command, held)
+        print(f"run directory: {trainer.run_dir}", file=sys.stderr)
+        if trainer.resume_note:
+            print(f"note: {trainer.resume_note}", file=sys.stderr)
+        if trainer.finished:
+            print(
+                f"note: the run is at update {trainer.update} of {trainer.cfg.updates}:"
+                " nothing to train (--updates N extends it)",
+                file=sys.stderr,
+            )
+        try:
+            status = trainer.run()
+        finally:
+            trainer.close()
+    return _report(trainer, status)
+
+
+def _report(trainer: Trainer, status: str) -> int:
+    """Print the summary and how the session ended; the exit status."""
+    _print_summary(trainer.last_summary)
+    resume = f"python -m a2cm_phys.train --resume {shlex.quote(str(trainer.run_dir))}"
+    if status == "interrupted":
+        signum = trainer.stop_signal or signal.SIGINT
+        print(
+            f"interrupted ({signal.Signals(signum).name}): checkpoint at update"
+            f" {trainer.saved_update}; resume with:\n  {resume}",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED if signum == signal.SIGINT else 128 + signum
+    if status == "worker_died":
+        print(
+            f"stopped: {trainer.stop_reason}\ncheckpoint at update {trainer.saved_update};"
+            f" resume with:\n  {resume}",
+            file=sys.stderr,
+        )
+        return EXIT_WORKER_DIED
+    if status == "no_space":
+        print(
+            f"stopped: {trainer.stop_reason}\nthe last good checkpoint (update"
+            f" {trainer.saved_update}) is kept, and the log holds every episode up to it;"
+            f" free some space (or copy {trainer.run_dir} elsewhere) and resume with:"
+            f"\n  {resume}",
+            file=sys.stderr,
+        )
+        return EXIT_NO_SPACE
+    if status == "nonfinite":
+        print(
+            f"stopped: {trainer.stop_reason} at update {trainer.update + 1}; the last"
+            f" good checkpoint (update {trainer.saved_update}) is kept in {trainer.run_dir}"
+            " (a lower --lr, a --reward-scale or a --max-grad-norm may help)",
+            file=sys.stderr,
+        )
+        return EXIT_NONFINITE
+    print(f"summary: {trainer.run_dir / 'summary.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
