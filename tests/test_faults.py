@@ -18,9 +18,10 @@ import pytest
 import torch
 from faults import TRAIN, invariant_problems, kill_at_write, kill_trial, new_run_args
 
+from a2cm_phys.analysis.figures import load_logged_run
 from a2cm_phys.commands.replay import main as replay_main
 from a2cm_phys.commands.train import EXIT_NO_SPACE, main
-from a2cm_phys.record import read_run
+from a2cm_phys.record import LogError, read_run
 from a2cm_phys.record.writer import EpisodeRecorder
 from a2cm_phys.training import checkpoint
 from a2cm_phys.training.rundir import run_lock
@@ -325,6 +326,25 @@ def test_a_damaged_first_part_hides_no_other(tmp_path, capsys, damage):
     assert replay_main([str(run_dir), "--verify"]) == 1
     out = capsys.readouterr().out
     assert "INTEGRITY episodes.mcap" in out and "lost" in out
+    with pytest.raises(LogError, match="episodes are missing"):  # no silently short figure
+        load_logged_run(run_dir)
+
+
+def test_a_damaged_part_that_lost_nothing_is_plotted_and_named(tmp_path, capsys):
+    """Resumed from update 0, the second part holds every episode: the first one's damage
+    loses nothing, and every reader says so instead of failing."""
+    run_dir = tmp_path / "run"
+    assert main([*GRID, "--updates", "6", "--run-dir", str(run_dir)]) == 0
+    os.replace(run_dir / "checkpoint.prev.pt", run_dir / "checkpoint.pt")  # the first save
+    assert checkpoint.load(run_dir)["update"] == 0
+    assert main(["--resume", str(run_dir), "--no-progress"]) == 0
+    (run_dir / "episodes.mcap").write_bytes(b"")
+    capsys.readouterr()
+    assert replay_main([str(run_dir), "--verify"]) == 1  # the damage is reported
+    assert "INTEGRITY episodes.mcap: unreadable" in capsys.readouterr().out
+    run = load_logged_run(run_dir)
+    assert len(run.columns["length"]) == _summary(run_dir)["episodes"]
+    assert any("episodes.mcap" in p for p in run.problems)
 
 
 def test_verify_finds_a_deleted_part_and_lost_episodes(tmp_path, capsys):

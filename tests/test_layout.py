@@ -60,12 +60,26 @@ def missing_modules() -> list[str]:
     return out
 
 
+def _type_only(tree: ast.Module) -> set[int]:
+    """Ids of the import nodes under ``if TYPE_CHECKING:`` (they never run)."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
+            out |= {id(n) for stmt in node.body for n in ast.walk(stmt)}
+    return out
+
+
 def imports(path: Path, names: set[str]) -> set[str]:
-    """The package's modules ``path`` imports, anywhere in the file (functions included)."""
+    """The package's modules ``path`` imports, anywhere in the file (functions included;
+    annotations' imports under ``if TYPE_CHECKING:`` left out: they never run)."""
     own = module_name(path)
     package = own if path.name == "__init__.py" else own.rsplit(".", 1)[0]
     out = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    type_only = _type_only(tree)
+    for node in ast.walk(tree):
+        if id(node) in type_only:
+            continue
         if isinstance(node, ast.Import):
             targets = [alias.name for alias in node.names]
         elif isinstance(node, ast.ImportFrom):

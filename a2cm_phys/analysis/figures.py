@@ -51,6 +51,8 @@ class Run:
     """Sparse update metrics of :data:`EXPLOIT_SERIES`: ``(env_steps, values)`` where logged."""
     scenario: Scenario | None = None
     """The run's resolved scenario (from its log's metadata)."""
+    problems: list[str] = field(default_factory=list)
+    """Parts of its log that could not be read though no episode is missing (to report)."""
 
 
 def log_files(path: Path) -> list[Path]:
@@ -70,8 +72,10 @@ def log_files(path: Path) -> list[Path]:
 def load_logged_run(path: Path) -> Run:
     """Read a run (every part of a run folder's log, each episode once) or one log file.
 
-    A :class:`LogError` if the log is damaged or holds no finished episode: a figure of
-    nothing, or of a silently shortened run, would mislead.
+    A :class:`LogError` if the log is damaged, misses episodes or holds no finished
+    episode: a figure of nothing, or of a silently shortened run, would mislead. A part that
+    cannot be read while every episode is still there (a later part holds them) is named in
+    :attr:`Run.problems`.
     """
     if not path.exists():
         raise LogError(f"{path}: no such file or folder")
@@ -80,6 +84,9 @@ def load_logged_run(path: Path) -> Run:
         raise LogError(f"{path}: the log is damaged ({log.error}); see python -m a2cm_phys.replay")
     if not log.n_episodes:
         raise LogError(f"{path}: the log holds no finished episode")
+    ids = log.episodes["episode"]
+    if log.problems and not np.array_equal(ids, np.arange(len(ids))):
+        raise LogError(f"{path}: episodes are missing ({'; '.join(log.problems)})")
     columns = {k: log.episodes[k] for k in ("return", "length", "collisions", "captured")}
     columns["env_steps"] = episode_env_steps(log)
     sc = log.scenario
@@ -91,6 +98,7 @@ def load_logged_run(path: Path) -> Run:
         clean=log.clean,
         exploit=_exploit(log),
         scenario=sc,
+        problems=list(log.problems),
     )
 
 

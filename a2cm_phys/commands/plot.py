@@ -97,6 +97,8 @@ def _main(argv: Sequence[str]) -> int:
     for run, path in zip(runs, args.runs, strict=True):
         if not run.clean:
             print(f"note: {path}: a log was not closed cleanly; plotting what was recovered")
+        for problem in run.problems:
+            print(f"note: {path}: {problem} (no episode is missing)")
     for path in plot_runs(runs, unique_labels(runs, args.runs), out, args.window):
         print(f"wrote {path}")
     return 0

@@ -15,19 +15,13 @@ can save its state (see :meth:`a2cm_phys.envs.vector.VectorEnv.state`).
 from __future__ import annotations
 
 import json
-import math
-import signal
-import sys
-import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager, nullcontext
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
 import torch
 from threadpoolctl import threadpool_limits
-from tqdm import tqdm
 
 from ..algos import NonFiniteLoss
 from ..base.exitcodes import OUT_OF_SPACE
@@ -47,9 +41,13 @@ from .descent import ExploitabilityDescent, check_descent
 from .episode_stats import EpisodeStats
 from .exploitability import exploitability, solvable
 from .opponents import LATEST, PAIRING_CODES, OpponentPool, Pairing, check_pool
+from .progress import ProgressBar
+from .recording import open_recorder
 from .rollout import StepHook, collect
-from .rundir import CONFIG_NAME, SUMMARY_NAME, write_atomic
+from .rundir import CONFIG_NAME
 from .seeding import policy_rng
+from .signals import ShieldedLog, StopSignals, signals_deferred
+from .summary import run_summary, write_summary
 from .teams import make_teams
 
 _ROLLOUT, _LEARN, _IDLE = "rollout", "learn", "idle"
@@ -149,7 +147,7 @@ class Trainer:
         self._last_save = time.perf_counter()
         self._phase = _IDLE
         self._log: Any = None  # the episode recorder while run() records
-        self._signals: _Signals | None = None  # the stop signals while run() runs
+        self._signals: StopSignals | None = None  # the stop signals while run() runs
         self.resume_note: str | None = None  # set by resume() when it fell back
 
     # ------------------------------------------------------------------ state
@@ -299,7 +297,7 @@ class Trainer:
         status = "done"
         # numpy's BLAS too gets the run's threads (it starts one per core otherwise: two
         # runs on two cores would then run four threads)
-        with threadpool_limits(limits=self.cfg.threads), self._signals_deferred() as signals:
+        with threadpool_limits(limits=self.cfg.threads), signals_deferred() as signals:
             self._signals = signals
             try:
                 if not (self.run_dir / checkpoint.CHECKPOINT_NAME).exists():
@@ -313,7 +311,8 @@ class Trainer:
                 status, self.stop_reason = "no_space", _os_error_text(err)
             self.stop_signal = signals.received
             try:
-                self._write_summary(status)
+                self.last_summary = self.summary(status)
+                write_summary(self.run_dir, self.last_summary)
             except OSError as err:
                 if err.errno not in OUT_OF_SPACE:
                     raise
@@ -323,13 +322,13 @@ class Trainer:
                 self._signals = None
         return status
 
-    def _train(self, signals: _Signals) -> str:
+    def _train(self, signals: StopSignals) -> str:
         """The loop of :meth:`run` with the log open; the status it stopped with."""
         dead_worker = _worker_error(self.scenario)
         status, save = "done", None
         with self._recorder() as recorder, self._bar() as bar:
             self._log = recorder
-            log = _ShieldedLog(recorder, signals) if recorder is not None else None
+            log = ShieldedLog(recorder, signals) if recorder is not None else None
             on_step = log.record_step if log is not None else None
             try:
                 while self.update < self.cfg.updates:
@@ -392,7 +391,7 @@ class Trainer:
         self.last_metrics = {}
         if pairing.learns("pursuers") and self.descent is None:  # else: by descent, below
             self.last_metrics = self.learner.update(self.batch, progress)
-        if self.evader is not None and pairing.learns("evader") and not self._evader_descends():
+        if self.evader is not None and pairing.learns("evader") and not self.evader_descends():
             evader_metrics = self.evader.learner.update(self.evader.batch, progress)
             self.last_metrics.update({f"evader_{k}": v for k, v in evader_metrics.items()})
         if pool is not None:  # who played: see a2cm_phys.training.opponents.PAIRING_CODES
@@ -425,155 +424,26 @@ class Trainer:
         if due or time.perf_counter() - self._last_save >= self.checkpoint_seconds:
             self.save_checkpoint()
 
-    @contextmanager
-    def _signals_deferred(self) -> Iterator[_Signals]:
-        """SIGINT and SIGTERM handled by a :class:`_Signals` for the time of the block."""
-        signals = _Signals()
-        if threading.current_thread() is not threading.main_thread():
-            yield signals
-            return
-        previous = {s: signal.signal(s, signals.handle) for s in _STOP_SIGNALS}
-        try:
-            yield signals
-        finally:
-            for s, handler in previous.items():
-                signal.signal(s, handler if handler is not None else signal.SIG_DFL)
-
     def _recorder(self) -> Any:
         """The MCAP episode recorder, or a null context when the run does not record (or
         has nothing left to train: a finished run gets no new, empty part)."""
         recorder = open_recorder(self) if self.record and not self.finished else None
         return recorder if recorder is not None else nullcontext()
 
-    def _bar(self) -> _Progress:
-        return _Progress(self) if self.progress else _Progress(None)
+    def _bar(self) -> ProgressBar:
+        return ProgressBar(self) if self.progress else ProgressBar(None)
 
-    # ------------------------------------------------------------------ summary
     def summary(self, status: str = "done") -> dict[str, Any]:
-        """Run statistics: episodes, mean length (last 1,000), collisions, captures, speed."""
-        s, cfg = self.stats, self.cfg
-        wall = self.wall_time()
-        steps = self.update * cfg.batch_size
-        per_episode = s.collisions / s.episodes if s.episodes else math.nan
-        return {
-            "status": status,
-            "run_dir": str(self.run_dir),
-            "scenario": self.scenario.name,
-            "algo": cfg.algo,
-            "seed": cfg.seed,
-            "num_envs": cfg.num_envs,
-            "updates": self.update,
-            "steps": steps,
-            "episodes": s.episodes,
-            "mean_length_last_1000": s.recent_mean(0),
-            "mean_return_last_1000": s.recent_mean(1),
-            **(
-                {
-                    "evader_mean_return_last_1000": s.recent_mean(3),
-                    "opponents": self._opponents(),
-                }
-                if self.evader is not None
-                else {}
-            ),
-            **({"descent_value": self.descent.last_value} if self.descent is not None else {}),
-            **(
-                {"evader_descent_value": self.descent.last_evader_value}
-                if self._evader_descends()
-                else {}
-            ),
-            "captures": s.captures,
-            "capture_rate": s.captures / s.episodes if s.episodes else math.nan,
-            "truncations": s.truncations,
-            "collision_terminations": s.collision_ends,
-            "collisions": s.collisions,
-            "collisions_per_episode": per_episode,
-            "wall_time_s": wall,
-            "steps_per_s": steps / wall if wall > 0 else math.nan,
-            "last_checkpoint_update": self.saved_update,
-        }
+        """Run statistics (:func:`.summary.run_summary`)."""
+        return run_summary(self, status)
 
-    def _evader_descends(self) -> bool:
+    def session_speed(self, now: float) -> float:
+        """Environment steps per second of wall time in this session, up to ``now``."""
+        return self._session_steps / max(now - self._session_start, 1e-9)
+
+    def evader_descends(self) -> bool:
         """Whether the learned evader learns by exploitability descent (not its rollouts)."""
         return self.descent is not None and self.descent.evader is not None
-
-    def _opponents(self) -> str:
-        """How the teams of a self-play run met their opponents, for the summary."""
-        cfg = self.cfg
-        text = "simultaneous" if self.pool is None else self.pool.describe(cfg.pool_every)
-        if self.descent is None:
-            return text
-        descent = f"exploitability descent every {cfg.descent_every} updates"
-        if self._evader_descends():
-            return f"both teams: {descent}"
-        return f"pursuers: {descent}; evader: {text}"
-
-    def _write_summary(self, status: str) -> None:
-        self.last_summary = self.summary(status)
-        strict = {  # NaN (e.g. no episode yet) is not JSON: write null
-            k: None if isinstance(v, float) and not math.isfinite(v) else v
-            for k, v in self.last_summary.items()
-        }
-        write_atomic(self.run_dir / SUMMARY_NAME, json.dumps(strict, indent=2) + "\n")
-
-
-_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-"""Signals that stop a run cleanly: Ctrl-C, and what ``timeout``, Slurm and Ray send."""
-
-
-class _Signals:
-    """What the stop signals asked: the first one requests a stop at the end of the update,
-    the second stops at once (raises ``KeyboardInterrupt``, but only between log writes);
-    after :meth:`shield`, while the run is being saved, signals are only acknowledged."""
-
-    def __init__(self) -> None:
-        self.stop_requested = False
-        self.received: int | None = None  # the first stop signal
-        self.in_log = False  # a log write is under way: an interrupt waits for its end
-        self.interrupt_pending = False
-        self.shielded = False
-
-    def handle(self, signum: int, frame: Any) -> None:
-        name = signal.Signals(signum).name
-        if self.shielded:
-            print(f"\n{name}: saving the checkpoint and closing the log, please wait",
-                  file=sys.stderr)  # fmt: skip
-            return
-        if not self.stop_requested:
-            self.stop_requested, self.received = True, signum
-            print(f"\n{name}: stopping after this update (again: at once)", file=sys.stderr)
-            return
-        if self.in_log:
-            self.interrupt_pending = True
-            return
-        raise KeyboardInterrupt
-
-    def shield(self) -> None:
-        """From now on, signals do not interrupt."""
-        self.shielded = True
-
-    def after_log(self) -> None:
-        """End of a log write: raise the interrupt that waited for it, if any."""
-        self.in_log = False
-        if self.interrupt_pending and not self.shielded:
-            self.interrupt_pending = False
-            raise KeyboardInterrupt
-
-
-class _ShieldedLog:
-    """The recorder's per-step and per-update calls, never cut in the middle by a signal."""
-
-    def __init__(self, recorder: Any, signals: _Signals) -> None:
-        self.recorder, self.signals = recorder, signals
-
-    def record_step(self, *args: Any) -> None:
-        self.signals.in_log = True
-        self.recorder.record_step(*args)
-        self.signals.after_log()
-
-    def record_update(self, update: int, metrics: dict[str, Any]) -> None:
-        self.signals.in_log = True
-        self.recorder.record_update(update, metrics)
-        self.signals.after_log()
 
 
 def _os_error_text(err: OSError) -> str:
@@ -613,85 +483,3 @@ def _worker_error(scenario: Scenario) -> type[Exception]:
 
 class _NeverRaised(Exception):
     pass
-
-
-def open_recorder(trainer: Trainer) -> Any:
-    """The run's MCAP recorder (``episodes.mcap``), or ``None`` if it cannot record.
-
-    The one call site of :mod:`a2cm_phys.record`: the recorder gets ``start(env, obs)``,
-    ``record_step(actions, step)`` after every vector step and ``record_update(update,
-    metrics)`` after every update.
-    """
-    try:
-        from ..record.writer import EpisodeRecorder
-    except ImportError:  # the record package is optional for training
-        return None
-    from ..record.parts import new_part, part_files
-
-    # A resumed session continues the log in a file of its own (an earlier one may have been
-    # cut short by a crash, or got ahead of the checkpoint), on the same clock and episode
-    # ids; readers let each part supersede what earlier parts logged from its start on. The
-    # games caught mid-episode get a summary without a trajectory.
-    step = trainer.update * trainer.cfg.steps_per_env
-    path, session = new_part(trainer.run_dir, trainer.update)
-    part = {
-        "session": session,
-        "update": trainer.update,
-        "episode": trainer.stats.episodes,
-        "step": step,
-        "after": [p.name for p in part_files(trainer.run_dir)],
-    }
-    recorder = EpisodeRecorder(
-        path,
-        trainer.scenario,
-        {"train": to_dict(trainer.cfg), "part": part},
-        log_every=trainer.log_every,
-        scene_every=trainer.scene_every,
-    )
-    recorder.start(trainer.env, trainer.obs, step=step, episode=trainer.stats.episodes)
-    return recorder
-
-
-class _Progress:
-    """A tqdm bar over updates showing episode statistics; a no-op without a trainer."""
-
-    def __init__(self, trainer: Trainer | None) -> None:
-        self.trainer = trainer
-        self.bar = None
-        self._next_postfix = 0.0
-
-    def __enter__(self) -> _Progress:
-        t = self.trainer
-        if t is not None:
-            self.bar = tqdm(total=t.cfg.updates, initial=t.update, unit="upd", dynamic_ncols=True)
-        return self
-
-    def tick(self) -> None:
-        if self.bar is None:
-            return
-        self.bar.update(1)
-        now = time.perf_counter()
-        if now >= self._next_postfix:  # formatting the postfix costs ~50 µs
-            self._next_postfix = now + 0.5
-            t = self.trainer
-            s = t.stats
-            self.bar.set_postfix(
-                episodes=s.episodes,
-                len100=f"{s.recent_mean(0, 100):.2f}",
-                ret100=f"{s.recent_mean(1, 100):.4g}",
-                **({"evader_ret100": f"{s.recent_mean(3, 100):.4g}"} if t.evader else {}),
-                **({"opp": t.pairing.kind} if t.pool is not None else {}),
-                **({"descent": f"{t.descent.last_value:.4g}"} if t.descent is not None else {}),
-                **(
-                    {"evader_descent": f"{t.descent.last_evader_value:.4g}"}
-                    if t._evader_descends()
-                    else {}
-                ),
-                collisions=s.collisions,
-                steps_s=f"{t._session_steps / (now - t._session_start):.0f}",
-                refresh=False,
-            )
-
-    def __exit__(self, *exc: object) -> None:
-        if self.bar is not None:
-            self.bar.close()
