@@ -198,3 +198,17 @@ if __name__ == "__main__":
         print("upward:", line)
     for line in missing_modules():
         print("missing:", line)
+
+
+def test_the_command_shims_only_hand_over():
+    """``python -m a2cm_phys.COMMAND`` files hold nothing but the hand-over to
+    :mod:`a2cm_phys.commands`, and ``python -m a2cm_phys COMMAND`` reaches the same."""
+    from a2cm_phys.commands import run
+
+    for name in COMMANDS:
+        text = (PACKAGE / f"{name}.py").read_text(encoding="utf-8")
+        code = [line for line in text.splitlines()[1:] if line.strip()]
+        assert len(code) <= 5, name
+        assert f"from .commands.{name} import main" in text
+    assert run(["no-such-command"]) == 2
+    assert run(["replay", str(PACKAGE / "no-such-run")]) == 2

@@ -289,7 +289,7 @@ def main_verify(log: RunLog) -> int:
     import contextlib
     import io
 
-    from a2cm_phys.commands.replay import verify
+    from a2cm_phys.record.verify import verify
 
     with contextlib.redirect_stdout(io.StringIO()):
         return verify(log, None)

@@ -13,7 +13,8 @@ from PIL import Image
 from test_record import check_messages, main_verify, make_log
 from test_replay import rewrite
 
-from a2cm_phys.commands.replay import episode_frames, episode_text, main
+from a2cm_phys.analysis.episodes import episode_frames, episode_text
+from a2cm_phys.commands.replay import main
 from a2cm_phys.config import Scenario
 from a2cm_phys.record import LogError, read_run
 from a2cm_phys.record.jsontext import json_float_rows

@@ -15,7 +15,8 @@ from mcap.writer import Writer
 from PIL import Image
 from test_record import FOXGLOVE_SCENE, make_log, validator
 
-from a2cm_phys.commands.replay import EXPORT_TOPIC, main
+from a2cm_phys.analysis.episodes import EXPORT_TOPIC
+from a2cm_phys.commands.replay import main
 from a2cm_phys.record import read_run
 from a2cm_phys.record.schemas import SUMMARY_TOPIC, TRAJECTORY_TOPIC
 

@@ -1,22 +1,12 @@
-"""Sweeps of scenarios × algorithms × seeds, each run a Ray task (or sequential without Ray).
+"""``python -m a2cm_phys.sweep``: scenarios × algorithms × seeds, each run a Ray task (or
+one after another without Ray).
 
     python -m a2cm_phys.sweep --scenarios grid,grid_collision --algos a2c,a2cm --seeds 0-4
 
-Each run is exactly ``python -m a2cm_phys.train`` with that scenario, algorithm and seed,
-written to its own run directory ``<logdir>/<scenario>-<algo>-s<seed>/`` (config,
-checkpoint, MCAP log, summary), so a sweep's numbers equal those of the runs done one by
-one. Re-running a sweep skips finished runs and resumes unfinished ones from their
-checkpoints, but only runs whose resolved scenario and training config are exactly the
-requested ones: a run directory holding another configuration is an error naming the
-difference, found before anything runs. A failing run is retried once and reported while the
-others go on. Each run holds its run directory's lock
-(:func:`a2cm_phys.training.rundir.run_lock`) while it runs: a run that another process
-writes (a ``train``, or a second sweep on the same ``--logdir``) is reported busy and left
-alone, so no run is ever written twice at once. Ctrl-C or SIGTERM stop the sweep cleanly:
-running runs save their checkpoints, the exit status is 130 or 143, and the same command
-resumes. Without ``--address`` Ray starts locally on this machine's cores; ``--address
-auto`` or ``ray://host:10001`` uses an existing cluster. Without Ray installed (``pip
-install -e ".[cluster]"``) the runs go one after another in this process."""
+Parses the options into run specs and prints each run's fate and the summary table; the
+sweep itself (reuse of finished runs, the runs' locks, retries, stopping on a signal) is
+:mod:`a2cm_phys.study.sweep`.
+"""
 
 from __future__ import annotations
 

@@ -1,26 +1,11 @@
-"""Train A2C or A2CM on a scenario: ``python -m a2cm_phys.train --scenario grid``.
+"""``python -m a2cm_phys.train --scenario grid``: train A2C or A2CM on a scenario.
 
-One trainer for both algorithms; only the model differs (``make_model``: one critic for
-A2CM, N for A2C). Each update collects ``batch_size`` steps (``batch_size / num_envs`` per
-game) and takes one learner step. A run lives in ``<logdir>/<scenario>-<algo>-s<seed>-<time>/``:
-
-- ``config.json``: the resolved scenario and training config, the command line(s) and the
-  library versions of each session;
-- ``checkpoint.pt``: everything to continue exactly (:meth:`Trainer.checkpoint_state`),
-  written atomically every ``checkpoint_seconds`` (or ``checkpoint_every`` updates), on
-  Ctrl-C and at the end;
-- ``summary.json``: episode counts, mean length, collisions, captures, time, speed;
-- ``episodes.mcap``: the episode log (:mod:`a2cm_phys.record`); each resumed session adds
-  a part ``episodes-from-NNNNNN.mcap`` (see :mod:`a2cm_phys.record.parts`).
-
-Ctrl-C and SIGTERM stop at the end of the update with a checkpoint (exit 130 or 143), a
-dead physics worker with a checkpoint at the last whole update (exit 4); each prints the
-command that resumes the run.
-
-``--resume RUN_DIR`` continues bit for bit in grid mode (an interrupted and resumed run
-ends with the same weights and episode statistics as an uninterrupted one). In physics
-mode the games running at the checkpoint are restarted on resume unless the physics core
-can save its state (see :meth:`a2cm_phys.envs.vector.VectorEnv.state`).
+Parses the options, claims the run directory (a new one under ``--logdir``, ``--run-dir``,
+or ``--resume RUN_DIR``: :mod:`a2cm_phys.training.rundir`, its lock held for the session),
+hands over to :class:`a2cm_phys.training.trainer.Trainer` and prints the summary and how
+the session ended, with the command that resumes it (exit statuses:
+:mod:`a2cm_phys.base.exitcodes`). What a run directory holds and why nothing is lost:
+``docs/design.md``.
 """
 
 from __future__ import annotations
