@@ -248,7 +248,7 @@ class Train:
     pool_every: int = 0  # self-play: snapshot both teams every K updates (0: simultaneous)
     pool_size: int = 10  # snapshots kept per team (oldest dropped): training/opponents.py
     pool_latest: float = 0.5  # probability that an update is latest against latest
-    # Grid self-play: exploitability descent (a2cm_phys/descent.py). The pursuers' actors
+    # Grid self-play: exploitability descent (training/descent.py). The pursuers' actors
     # learn only by stepping down the discounted value of the evader's exact best response
     # to them, every K updates; the evader learns from the rollouts, or ("both") by
     # stepping up the value of the pursuers' exact best response to it.

@@ -281,8 +281,9 @@ class Trainer:
 
     # ------------------------------------------------------------------ training
     def run(self) -> str:
-        """Train up to ``cfg.updates``; return ``"done"``, ``"interrupted"``, ``"nonfinite"``
-        or ``"worker_died"``.
+        """Train up to ``cfg.updates``; return ``"done"``, ``"interrupted"``, ``"nonfinite"``,
+        ``"worker_died"`` or ``"no_space"`` (a write failed for want of space: the last good
+        checkpoint is kept, consistent with the log; :attr:`stop_reason` names the file).
 
         The first Ctrl-C or SIGTERM stops at the end of the current update (a second one
         stops at once, but never in the middle of writing the log); either way the
