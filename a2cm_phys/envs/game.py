@@ -8,11 +8,20 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 
 from ..config import Scenario
 from .core import Core, StepOutcome, action_shape, check_actions, check_commands
 from .factory import make_core
 from .render import render_rgb, render_text
+
+
+class EnvNotReset(ResetNeeded, RuntimeError):
+    """A method that needs an episode was called before ``reset()``."""
+
+
+class EnvClosed(ClosedEnvironmentError, RuntimeError):
+    """A method was called after ``close()``."""
 
 
 class Game:
@@ -30,6 +39,21 @@ class Game:
         self.names = scenario.agents
         self._seeds: np.random.Generator | None = None
         self.last: StepOutcome | None = None
+        self.started = False  # reset() was called
+        self.closed = False
+
+    def check(self, method: str, started: bool = True) -> None:
+        """Refuse ``method`` after :meth:`close` (:class:`EnvClosed`) and, if it needs an
+        episode, before :meth:`reset` (:class:`EnvNotReset`); both are ``RuntimeError`` and
+        Gymnasium's own errors, so each API's users catch what they expect."""
+        if self.closed:
+            raise EnvClosed(f"{method}() called after close(): this env is closed; make a new one")
+        if started and not self.started:
+            raise EnvNotReset(f"{method}() called before reset(): call reset() first")
+
+    def close(self) -> None:
+        """Refuse everything but ``close()`` from now on."""
+        self.closed = True
 
     def reset(self, seed: int | None = None, options: Mapping[str, Any] | None = None) -> int:
         """Start an episode; returns its episode seed. ``options["positions"]`` places agents;
@@ -54,6 +78,7 @@ class Game:
             )
         self.core.reset(np.array([0]), np.array([episode_seed], dtype=np.uint64), [positions])
         self.last = None
+        self.started = True
         return episode_seed
 
     def step(

@@ -15,7 +15,6 @@ from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 
 from ..config import ConfigError, Scenario, load_scenario
 from .game import Game
@@ -56,22 +55,19 @@ class PursuitEnv(gym.Env):
             self.action_space = gym.spaces.Box(-1.0, 1.0, (n, 2), dtype=np.float32)
         else:
             self.action_space = gym.spaces.MultiDiscrete([self.scenario.actions] * n)
-        self._started = False
-        self._closed = False
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start an episode (``options={"positions": …}`` places agents)."""
-        self._check_open("reset")
+        self.game.check("reset", started=False)
         super().reset(seed=seed)
         episode_seed = self.game.reset(seed, options)
-        self._started = True
         return self.game.observation(), {**self.game.info(), "episode_seed": episode_seed}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply the joint action; returns the team reward."""
-        self._check_started("step")
+        self.game.check("step")
         out = self.game.step(np.asarray(action))
         return (
             self.game.observation(),
@@ -83,22 +79,9 @@ class PursuitEnv(gym.Env):
 
     def render(self) -> str | np.ndarray | None:
         """A text picture (``ansi``) or an RGB array (``rgb_array``) of the arena."""
-        self._check_started("render")
+        self.game.check("render")
         return self.game.render(self.render_mode)
 
     def close(self) -> None:
         """Release the simulation; the env then refuses everything but ``close()``."""
-        self._closed = True
-
-    def _check_open(self, method: str) -> None:
-        """A ``ClosedEnvironmentError`` if the env was closed."""
-        if self._closed:
-            raise ClosedEnvironmentError(
-                f"{method}() called after close(): this env is closed; make a new one"
-            )
-
-    def _check_started(self, method: str) -> None:
-        """A ``ClosedEnvironmentError`` after ``close()``, a ``ResetNeeded`` before ``reset()``."""
-        self._check_open(method)
-        if not self._started:
-            raise ResetNeeded(f"{method}() called before reset(): call reset() first")
+        self.game.close()

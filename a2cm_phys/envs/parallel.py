@@ -76,8 +76,6 @@ class PursuitParallelEnv:
         self._action_space = action_space(scenario)
         self.state_space = self._observation_space
         self.episode_seed: int | None = None
-        self._started = False
-        self._closed = False
 
     def observation_space(self, agent: str) -> spaces.Box:
         """Every agent observes the global state vector."""
@@ -91,9 +89,8 @@ class PursuitParallelEnv:
         self, seed: int | None = None, options: Mapping[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
         """Start an episode; ``options={"positions": {agent: (x, y)}}`` places agents."""
-        self._check_open("reset")
+        self.game.check("reset", started=False)
         self.episode_seed = self.game.reset(seed, options)
-        self._started = True
         self.agents = list(self.possible_agents)
         obs = self.game.observation()
         info = self.game.info()
@@ -102,7 +99,7 @@ class PursuitParallelEnv:
     def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Move every agent (one action each; a scripted evader moves by itself); see the
         class docstring."""
-        self._check_started("step")
+        self.game.check("step")
         if not self.agents:
             raise RuntimeError("step() called on a finished episode: call reset() first")
         try:
@@ -177,31 +174,18 @@ class PursuitParallelEnv:
 
     def state(self) -> np.ndarray:
         """The global state: the same vector every agent observes."""
-        self._check_started("state")
+        self.game.check("state")
         return self.game.observation()
 
     def render(self) -> str | np.ndarray | None:
         """A text picture (``ansi``) or an RGB array (``rgb_array``) of the arena."""
-        self._check_started("render")
+        self.game.check("render")
         return self.game.render(self.render_mode)
 
     def close(self) -> None:
         """Release the simulation; the env then refuses everything but ``close()``."""
-        self._closed = True
+        self.game.close()
         self.agents = []
-
-    def _check_open(self, method: str) -> None:
-        """A ``RuntimeError`` if the env was closed."""
-        if self._closed:
-            raise RuntimeError(
-                f"{method}() called after close(): this env is closed; make a new one (make_env)"
-            )
-
-    def _check_started(self, method: str) -> None:
-        """A ``RuntimeError`` if the env was closed or has not been reset yet."""
-        self._check_open(method)
-        if not self._started:
-            raise RuntimeError(f"{method}() called before reset(): call reset() first")
 
     @property
     def unwrapped(self) -> PursuitParallelEnv:

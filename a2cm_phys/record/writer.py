@@ -180,40 +180,37 @@ class EpisodeRecorder:
         holds the evader's actions, learned or scripted. (``episode_seeds_before`` is
         accepted but not needed: each finished episode's summary carries its seed.) A failed
         write raises an ``OSError`` naming the log's file."""
-        try:
-            self._record_step(actions, step)
-        except OSError as err:
-            raise self._named(err) from None
-
-    def _record_step(self, actions: np.ndarray, step: VecStep) -> None:
         if self._vec is None or self._closed:
             raise RuntimeError("EpisodeRecorder.record_step before start() or after close()")
-        buf = self._buf
-        if self._row + 1 >= buf.rows:
-            self._make_room()
-        r = self._row = self._row + 1
-        buf.write(r, actions, step)
-        out = step.outcome
-        if out.events is not None:
-            for i, events in enumerate(out.events):
-                if events:
-                    self._events[i].extend(events)
-        self._steps += 1
-        if step.episodes:
-            buf.write_starts(r, self._vec)
-            begin, pending, events = self._begin, self._pending, self._events
-            physics = buf.vel is not None
-            for e in step.episodes:
-                ev = None
-                if physics or events[e.env]:
-                    ev, events[e.env] = events[e.env], []
-                whole = e.env not in self._partial
-                self._partial.discard(e.env)
-                pending.append((e, begin[e.env], r, ev, whole))
-                begin[e.env] = r
-            self._finished += len(step.episodes)
-        if time.monotonic() >= self._deadline:
-            self.flush()
+        try:  # a failed write (full disk) names the log's file
+            buf = self._buf
+            if self._row + 1 >= buf.rows:
+                self._make_room()
+            r = self._row = self._row + 1
+            buf.write(r, actions, step)
+            out = step.outcome
+            if out.events is not None:
+                for i, events in enumerate(out.events):
+                    if events:
+                        self._events[i].extend(events)
+            self._steps += 1
+            if step.episodes:
+                buf.write_starts(r, self._vec)
+                begin, pending, events = self._begin, self._pending, self._events
+                physics = buf.vel is not None
+                for e in step.episodes:
+                    ev = None
+                    if physics or events[e.env]:
+                        ev, events[e.env] = events[e.env], []
+                    whole = e.env not in self._partial
+                    self._partial.discard(e.env)
+                    pending.append((e, begin[e.env], r, ev, whole))
+                    begin[e.env] = r
+                self._finished += len(step.episodes)
+            if time.monotonic() >= self._deadline:
+                self.flush()
+        except OSError as err:
+            raise self._named(err) from None
 
     def record_update(self, update: int, metrics: dict[str, Any]) -> None:
         """Log one learner update's ``metrics`` (e.g. ``policy_loss``, ``value_loss``,

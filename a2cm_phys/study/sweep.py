@@ -53,6 +53,7 @@ from ..training.rundir import (
     CONFIG_NAME,
     SUMMARY_NAME,
     RunBusy,
+    read_config,
     remove_stray_temps,
     run_lock,
     write_atomic,
@@ -141,13 +142,11 @@ def _plain(obj: Any) -> Any:
 def stored_config(run_dir: Path) -> dict[str, Any] | None:
     """The resolved ``scenario`` and ``train`` config a run directory holds (its
     ``config.json``, else its checkpoint), or ``None`` if it holds no run."""
-    path = run_dir / CONFIG_NAME
-    if path.exists():
+    if (run_dir / CONFIG_NAME).exists():
         try:
-            config = json.loads(path.read_text())
-            return {"scenario": config["scenario"], "train": config["train"]}
-        except (OSError, ValueError, KeyError):
-            raise ConfigError(f"{path}: unreadable; cannot tell which run this is") from None
+            return read_config(run_dir)
+        except ConfigError as err:
+            raise ConfigError(f"{err}; cannot tell which run this is") from None
     if (run_dir / CHECKPOINT_NAME).exists():
         try:
             state = checkpoint.load(run_dir)

@@ -23,10 +23,11 @@ import re
 from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
 from ..base.errors import UserError
 from ..base.versions import library_versions
-from ..config import Scenario, Train, to_dict
+from ..config import ConfigError, Scenario, Train, to_dict
 
 CONFIG_NAME = "config.json"
 """The resolved scenario and training config, the commands and library versions."""
@@ -196,3 +197,21 @@ def append_session(
         config["resumed"] = []
     config["resumed"].append(resumed)
     write_atomic(path, json.dumps(config, indent=2) + "\n")
+
+
+def read_config(run_dir: Path) -> dict[str, Any]:
+    """The ``scenario`` and ``train`` dicts of the run's ``config.json``; a
+    :class:`~a2cm_phys.config.ConfigError` naming the file if it is missing, unreadable or
+    holds no such dicts."""
+    path = Path(run_dir) / CONFIG_NAME
+    try:
+        config = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as err:
+        raise ConfigError(f"{path}: unreadable ({err})") from None
+    if not (
+        isinstance(config, dict)
+        and isinstance(config.get("scenario"), dict)
+        and isinstance(config.get("train"), dict)
+    ):
+        raise ConfigError(f"{path}: holds no scenario and train configuration")
+    return {"scenario": config["scenario"], "train": config["train"]}

@@ -14,7 +14,6 @@ can save its state (see :meth:`a2cm_phys.envs.vector.VectorEnv.state`).
 
 from __future__ import annotations
 
-import json
 import time
 from contextlib import nullcontext
 from pathlib import Path
@@ -44,7 +43,7 @@ from .opponents import LATEST, PAIRING_CODES, OpponentPool, Pairing, check_pool
 from .progress import ProgressBar
 from .recording import open_recorder
 from .rollout import StepHook, collect
-from .rundir import CONFIG_NAME
+from .rundir import CONFIG_NAME, read_config
 from .seeding import policy_rng
 from .signals import ShieldedLog, StopSignals, signals_deferred
 from .summary import run_summary, write_summary
@@ -458,18 +457,10 @@ def _stored_run(run_dir: Path, state: dict[str, Any] | None) -> tuple[dict[str, 
     checkpoint, or ``config.json`` for a run that never saved one."""
     if state is not None:
         return state, f"{run_dir} (checkpoint)"
-    path = run_dir / CONFIG_NAME
     try:
-        config = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as err:
-        raise ConfigError(f"--resume: {path}: no checkpoint, and unreadable ({err})") from None
-    if not (
-        isinstance(config, dict)
-        and isinstance(config.get("scenario"), dict)
-        and isinstance(config.get("train"), dict)
-    ):
-        raise ConfigError(f"--resume: {path}: no checkpoint, and no scenario and train in it")
-    return config, f"{path}"
+        return read_config(run_dir), str(run_dir / CONFIG_NAME)
+    except ConfigError as err:
+        raise ConfigError(f"--resume: no checkpoint, and {err}") from None
 
 
 def _worker_error(scenario: Scenario) -> type[Exception]:
