@@ -120,7 +120,7 @@ def run(scenario: str, algo: str, variant: str, seed: int, steps: int, episodes:
     batch = resolve_train(sc, load_train(options)).batch_size
     cfg = load_train({**options, "algo": algo, "seed": seed, "updates": steps // batch})
     with tempfile.TemporaryDirectory() as tmp:
-        trainer = Trainer(sc, cfg, tmp, record=False)
+        trainer = Trainer(sc, resolve_train(sc, cfg), tmp, record=False)
         start = time.perf_counter()
         status = trainer.run()
         seconds = time.perf_counter() - start

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from a2cm_phys.config import load_scenario, load_train
+from a2cm_phys.config import load_scenario, load_train, resolve_train
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.record import EpisodeRecorder
 
@@ -64,10 +64,11 @@ def trainer_run(
     """Seconds for ``updates`` A2CM updates, with the MCAP log in ``run_dir`` if given."""
     from a2cm_phys.training.trainer import Trainer
 
-    cfg = load_train({"num_envs": envs, "updates": updates, "seed": seed})
+    scenario = load_scenario(scenario_name)
+    cfg = resolve_train(scenario, load_train({"num_envs": envs, "updates": updates, "seed": seed}))
     with tempfile.TemporaryDirectory() as tmp:
         trainer = Trainer(
-            load_scenario(scenario_name),
+            scenario,
             cfg,
             run_dir or Path(tmp),
             record=run_dir is not None,

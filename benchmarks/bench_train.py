@@ -20,7 +20,7 @@ import tempfile
 import time
 
 from a2cm_phys.analysis.evaluation import play
-from a2cm_phys.config import load_scenario, load_train
+from a2cm_phys.config import load_scenario, load_train, resolve_train
 from a2cm_phys.training.runs import model_policy
 from a2cm_phys.training.trainer import Trainer
 
@@ -45,7 +45,8 @@ def train(
         }
     )
     with tempfile.TemporaryDirectory() as tmp:
-        trainer = Trainer(load_scenario(scenario), cfg, tmp, record=record)
+        sc = load_scenario(scenario)
+        trainer = Trainer(sc, resolve_train(sc, cfg), tmp, record=record)
         start = time.perf_counter()
         status = trainer.run()
         seconds = time.perf_counter() - start

@@ -3,7 +3,7 @@
     python benchmarks/greedy_loss.py RUN_DIR [--top 12]
 
 The greedy joint policy of the run's actors is replayed through the exact grid rule
-(:func:`~a2cm_phys.solve.evaluate.policy_chain`) against the scenario's scripted evader.
+(:func:`~a2cm_phys.solve.policy_chain.policy_chain`) against the scenario's scripted evader.
 From the default start, its expected capture time exceeds the optimum's by exactly
 ``Σ_s visits(s) · (Q*(s, π(s)) − V*(s))``: each state's expected visits under the policy
 times the steps its chosen joint action loses by the oracle's values. The script prints
@@ -21,7 +21,7 @@ import numpy as np
 
 from a2cm_phys.analysis.sources import load_pursuer_run
 from a2cm_phys.solve.cache import load_or_solve
-from a2cm_phys.solve.evaluate import evaluate_policy, policy_chain, state_visits
+from a2cm_phys.solve.policy_chain import evaluate_policy, policy_chain, state_visits
 from a2cm_phys.solve.tables import model_table, start_state
 
 

@@ -19,7 +19,7 @@ import tempfile
 
 import torch
 
-from a2cm_phys.config import Train, load_scenario, load_train
+from a2cm_phys.config import Train, load_scenario, load_train, resolve_train
 from a2cm_phys.training.trainer import Trainer
 
 RUNS = (
@@ -53,8 +53,9 @@ def main() -> None:
     digest = hashlib.sha256()
     with tempfile.TemporaryDirectory() as tmp:
         for name, algo, updates in RUNS:
-            cfg = load_train(options(name, updates, algo))
-            trainer = Trainer(load_scenario(name), cfg, f"{tmp}/{name}-{algo}", record=False)
+            scenario = load_scenario(name)
+            cfg = resolve_train(scenario, load_train(options(name, updates, algo)))
+            trainer = Trainer(scenario, cfg, f"{tmp}/{name}-{algo}", record=False)
             trainer.run()
             for key, value in sorted(trainer.model.state_dict().items()):
                 digest.update(key.encode())

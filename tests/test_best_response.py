@@ -429,13 +429,13 @@ def test_cli_errors_are_one_line(
 def test_cli_with_a_trained_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A run's actors (general table) against the evader's best response; the scenario is
     the run's own when ``--scenario`` is not given."""
-    from a2cm_phys.config import load_train
+    from a2cm_phys.config import load_train, resolve_train
     from a2cm_phys.training.runs import load_trained
     from a2cm_phys.training.trainer import Trainer
 
     sc = grid(size=3, pursuers=2, max_steps=30)
     cfg = load_train({"num_envs": 4, "updates": 2})
-    assert Trainer(sc, cfg, tmp_path, record=False).run() == "done"
+    assert Trainer(sc, resolve_train(sc, cfg), tmp_path, record=False).run() == "done"
     assert main(["--best-response", "evader", "--pursuers", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     _, model = load_trained(tmp_path)

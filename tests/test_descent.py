@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import torch
 
-from a2cm_phys.config import ConfigError, load_scenario, load_train
+from a2cm_phys.config import ConfigError, load_scenario, load_train, resolve_train
 from a2cm_phys.envs.grid import GridRules
 from a2cm_phys.solve.best_response import evader_best_response, pursuers_best_response
-from a2cm_phys.solve.descent import EvaderGradient, WorstCaseGradient
 from a2cm_phys.solve.tables import model_table, n_states, start_state, state_cells
+from a2cm_phys.solve.worst_case import EvaderGradient, WorstCaseGradient
 from a2cm_phys.training.descent import ExploitabilityDescent, check_descent
 from a2cm_phys.training.teams import make_teams
 
@@ -157,6 +157,7 @@ def test_descent_steps_lower_the_worst_case() -> None:
     scenario = small()
     cfg = load_train({"layers": 2, "hidden": 64, "encoding": "onehot", "descent_lr": 3e-3,
                       "descent_steps": 5, "descent_every": 1})  # fmt: skip
+    cfg = resolve_train(scenario, cfg)
     pursuers, _ = make_teams(scenario, cfg)
     descent = ExploitabilityDescent(scenario, cfg, pursuers.model, seed=0)
 
@@ -175,7 +176,7 @@ def test_descent_steps_lower_the_worst_case() -> None:
 @pytest.mark.parametrize("teams", ["pursuers", "both"])
 def test_descent_state_round_trips(teams: str) -> None:
     scenario = small()
-    cfg = load_train({"descent_every": 1, "descent_teams": teams})
+    cfg = resolve_train(scenario, load_train({"descent_every": 1, "descent_teams": teams}))
 
     def descent(seed: int) -> ExploitabilityDescent:
         pursuers, evader = make_teams(scenario, cfg)
@@ -207,7 +208,7 @@ def test_descent_state_round_trips(teams: str) -> None:
 )
 def test_descent_and_one_hot_inputs_need_a_grid(scenario: str, options: dict, key: str) -> None:
     with pytest.raises(ConfigError, match=f"key '{key}'"):
-        check_descent(load_scenario(scenario), load_train(options))
+        resolve_train(load_scenario(scenario), load_train(options))
 
 
 def test_descent_refuses_arenas_beyond_the_exact_solver() -> None:
@@ -223,7 +224,7 @@ def test_in_self_play_the_pursuers_learn_by_descent_alone(tmp_path) -> None:
 
     scenario = load_scenario("grid_vs", {**SMALL, "max_steps": 50})
     cfg = load_train({"num_envs": 4, "batch_size": 32, "updates": 4, "descent_every": 2})
-    trainer = Trainer(scenario, cfg, tmp_path, record=False)
+    trainer = Trainer(scenario, resolve_train(scenario, cfg), tmp_path, record=False)
 
     def weights(model, prefix: str) -> list[torch.Tensor]:
         return [p.detach().clone() for k, p in model.named_parameters() if k.startswith(prefix)]
@@ -338,6 +339,7 @@ def test_evader_descent_raises_its_worst_case() -> None:
     scenario = small()
     cfg = load_train({"layers": 2, "hidden": 64, "encoding": "onehot", "descent_lr": 3e-3,
                       "descent_steps": 5, "descent_every": 1, "descent_teams": "both"})  # fmt: skip
+    cfg = resolve_train(scenario, cfg)
     pursuers, evader = make_teams(scenario, cfg)
     descent = ExploitabilityDescent(scenario, cfg, pursuers.model, 0, evader.model)
 
@@ -365,7 +367,7 @@ def test_evader_descent_needs_descent_and_no_ending_collisions(
     overrides: dict, options: dict, match: str
 ) -> None:
     with pytest.raises(ConfigError, match=match):
-        check_descent(load_scenario("grid_vs", {**SMALL, **overrides}), load_train(options))
+        resolve_train(load_scenario("grid_vs", {**SMALL, **overrides}), load_train(options))
 
 
 def test_with_both_teams_the_evader_learns_by_descent_alone(tmp_path) -> None:
@@ -376,7 +378,7 @@ def test_with_both_teams_the_evader_learns_by_descent_alone(tmp_path) -> None:
     scenario = load_scenario("grid_vs", {**SMALL, "max_steps": 50})
     cfg = load_train({"num_envs": 4, "batch_size": 32, "updates": 4, "descent_every": 2,
                       "descent_teams": "both"})  # fmt: skip
-    trainer = Trainer(scenario, cfg, tmp_path, record=False)
+    trainer = Trainer(scenario, resolve_train(scenario, cfg), tmp_path, record=False)
     moved = []
     update = trainer._one_update
 
@@ -400,6 +402,6 @@ def test_the_descent_preset_is_grid_self_play_with_deeper_one_hot_actors() -> No
     cfg = load_train(preset("descent"))
     assert cfg.descent_every > 0 and cfg.layers == 2 and cfg.encoding == "onehot"
     assert cfg.descent_teams == "both"
-    check_descent(load_scenario("grid_vs"), cfg)  # fine there
+    check_descent(load_scenario("grid_vs"), resolve_train(load_scenario("grid_vs"), cfg))
     with pytest.raises(ConfigError, match="key 'descent_every'"):
-        check_descent(load_scenario("grid"), cfg)
+        resolve_train(load_scenario("grid"), cfg)

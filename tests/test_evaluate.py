@@ -13,7 +13,7 @@ from a2cm_phys.analysis.evaluation import play
 from a2cm_phys.analysis.policies import random_policy
 from a2cm_phys.analysis.stats import bootstrap_ci, describe, mean_and_se, t_interval
 from a2cm_phys.commands.evaluate import main
-from a2cm_phys.config import load_scenario, load_train
+from a2cm_phys.config import load_scenario, load_train, resolve_train
 from a2cm_phys.training.episode_stats import EpisodeStats
 from a2cm_phys.training.trainer import Trainer
 
@@ -23,7 +23,8 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A short trained run (a checkpoint to evaluate)."""
     path = tmp_path_factory.mktemp("run")
     cfg = load_train({"num_envs": 16, "updates": 20})
-    assert Trainer(load_scenario("grid"), cfg, path, record=False).run() == "done"
+    grid = load_scenario("grid")
+    assert Trainer(grid, resolve_train(grid, cfg), path, record=False).run() == "done"
     return path
 
 

@@ -18,6 +18,7 @@ from a2cm_phys.config import (
     MAX_WEIGHTS,
     PRESETS,
     ConfigError,
+    check_network_size,
     load_scenario,
     load_train,
     network_weights,
@@ -118,7 +119,7 @@ def test_the_layout_check_covers_control_moves_and_one_hot_arenas() -> None:
         check_layout(load_scenario("grid", {"actions": 5}), load_scenario("grid"), "R")
     grid, bigger = load_scenario("grid"), load_scenario("grid", {"size": 6})
     check_layout(grid, bigger, "R")  # xy inputs: any arena
-    onehot = make_model(load_train({"encoding": "onehot"}), grid)
+    onehot = make_model(resolve_train(grid, load_train({"encoding": "onehot"})), grid)
     with pytest.raises(ConfigError, match=r"run R was trained with size = 5.* has size = 6"):
         check_layout(grid, bigger, "R", onehot)
     check_layout(grid, grid, "R", onehot)
@@ -136,10 +137,10 @@ def test_networks_too_large_to_allocate_are_refused_before_anything_is_built(
     with pytest.raises(ConfigError, match=r"keys 'hidden', 'layers'"):
         resolve_train(grid, load_train({"hidden": 4096, "layers": 8}))
     resolve_train(grid, load_train({"hidden": 16_384}))  # one wide layer: 0.9 million
-    for name in scenario_names():  # every shipped scenario and preset stays accepted
+    for name in scenario_names():  # every shipped scenario and preset is small enough
         sc = load_scenario(name)
         for values in ({}, *PRESETS.values()):
-            resolve_train(sc, load_train(values))
+            check_network_size(sc, load_train(values))
 
 
 @pytest.mark.parametrize("scenario", ["grid", "grid_vs", "phys", "phys_cont_vs"])
@@ -151,6 +152,10 @@ def test_the_weight_count_is_the_built_networks(scenario: str, train: dict) -> N
     from a2cm_phys.training.teams import make_teams
 
     sc = load_scenario(scenario)
+    if train.get("encoding") == "onehot" and sc.mode != "grid":
+        with pytest.raises(ConfigError, match="key 'encoding'"):  # refused when resolved
+            resolve_train(sc, load_train({**train, "updates": 1}))
+        return
     cfg = resolve_train(sc, load_train({**train, "updates": 1}))
     pursuers, evader = make_teams(sc, cfg)
     built = sum(p.numel() for team in (pursuers, evader) if team for p in team.model.parameters())

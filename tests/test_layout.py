@@ -190,6 +190,59 @@ def test_the_checks_see_what_they_look_for(tmp_path, monkeypatch, case):
     assert "a2cm_phys.config -> a2cm_phys.envs.grid" in upward(edges)
 
 
+LIMITS = {"file": 400, "class": 150, "function": 80}
+"""The largest room of each kind, in lines (issue 30)."""
+
+KEPT_LARGE: dict[str, str] = {}
+"""``path:name`` -> why it stays over its limit (its docstring says so too)."""
+
+
+def oversized() -> list[str]:
+    """``kind lines path[:name]`` for every file, class and function of the package over
+    its limit in :data:`LIMITS`, less those in :data:`KEPT_LARGE`."""
+    out = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        where = path.relative_to(PACKAGE.parent).as_posix()
+        found = [("file", len(text.splitlines()), where)]
+        for node in ast.walk(ast.parse(text)):
+            kind = {ast.ClassDef: "class", ast.FunctionDef: "function"}.get(type(node))
+            kind = "function" if isinstance(node, ast.AsyncFunctionDef) else kind
+            if kind:
+                found.append((kind, node.end_lineno - node.lineno + 1, f"{where}:{node.name}"))
+        out += [
+            f"{kind} {lines} {name}"
+            for kind, lines, name in found
+            if lines > LIMITS[kind] and name not in KEPT_LARGE
+        ]
+    return out
+
+
+def test_no_room_is_too_large_to_read():
+    assert oversized() == []
+
+
+RESOLVED_AT = {"a2cm_phys.commands.train", "a2cm_phys.study.runspec"}
+"""Where training options enter and are resolved, once (``config.resolve_train``): the
+train command, and a sweep's (or the report's) run spec."""
+
+
+def resolve_calls() -> set[str]:
+    """The modules outside :mod:`a2cm_phys.config` that call ``resolve_train``."""
+    out = set()
+    for name, path in modules().items():
+        if name.startswith("a2cm_phys.config"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "resolve_train":
+                out.add(name)
+    return out
+
+
+def test_the_training_config_is_resolved_once_where_options_enter():
+    assert resolve_calls() == RESOLVED_AT
+
+
 if __name__ == "__main__":
     g = graph()
     for c in cycles(g):
@@ -198,6 +251,8 @@ if __name__ == "__main__":
         print("upward:", line)
     for line in missing_modules():
         print("missing:", line)
+    for line in oversized():
+        print("too large:", line)
 
 
 def test_the_command_shims_only_hand_over():

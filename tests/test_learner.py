@@ -16,16 +16,19 @@ from torch.distributions import Categorical
 from a2cm_phys.algos.distributions import GaussianActions
 from a2cm_phys.algos.learner import Learner, NonFiniteLoss
 from a2cm_phys.algos.models import ActorCritic, StackedLinear
-from a2cm_phys.config import Train, load_train, preset
+from a2cm_phys.config import Train, load_scenario, load_train, preset, resolve_train
 from a2cm_phys.training.rollout import allocate_batch
 
 torch.set_num_threads(1)
 
 
+GRID = load_scenario("grid")
+
+
 def paper_cfg(**options: object) -> Train:
-    """The paper's method (``--preset paper``) with ``options``: the plain loss these tests
-    check piece by piece (the defaults add our pieces on top)."""
-    return Train(**{**preset("paper"), **options})
+    """The paper's method (``--preset paper``) with ``options``, resolved on the grid: the
+    plain loss these tests check piece by piece (the defaults add our pieces on top)."""
+    return resolve_train(GRID, Train(**{**preset("paper"), **options}))
 
 N, OBS, A = 3, 8, 4
 
@@ -463,7 +466,7 @@ def test_constraint_needs_split_components() -> None:
 
 
 def test_non_finite_rewards_change_nothing_under_our_settings() -> None:
-    cfg = Train()  # ours: PopArt normalisation, split components, advantage normalisation
+    cfg = resolve_train(GRID, Train())  # ours: PopArt, split components, normalised advantages
     m = ActorCritic(OBS, N, A, 16, shared_critic=True, n_values=2)
     learner = Learner(m, cfg)
     batch = trainer_batch(seed=3)
@@ -479,7 +482,7 @@ def test_non_finite_rewards_change_nothing_under_our_settings() -> None:
 
 
 def test_mean_bound_loss_by_hand():
-    from a2cm_phys.algos.learner import MEAN_BOUND, mean_bound_loss
+    from a2cm_phys.algos.losses import MEAN_BOUND, mean_bound_loss
 
     b = MEAN_BOUND
     means = torch.tensor([[[[0.5, b + 0.2]], [[-b - 0.5, 0.0]]]])  # (T=1, B=2, N=1, dim=2)
@@ -492,7 +495,7 @@ def test_mean_bound_loss_by_hand():
 def test_mean_bound_pulls_runaway_gaussian_means_back():
     """With no advantage signal, the bound alone moves means beyond it back towards ±1.1,
     and leaves means inside it untouched."""
-    from a2cm_phys.algos.learner import mean_bound_loss
+    from a2cm_phys.algos.losses import mean_bound_loss
 
     out = torch.tensor([[[[3.0, 0.5]]]], requires_grad=True)
     mean_bound_loss(out).backward()

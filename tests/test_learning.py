@@ -8,7 +8,7 @@ from pathlib import Path
 from a2cm_phys.analysis.evaluation import play
 from a2cm_phys.analysis.policies import random_policy
 from a2cm_phys.analysis.stats import mean_and_se
-from a2cm_phys.config import load_scenario, load_train
+from a2cm_phys.config import load_scenario, load_train, resolve_train
 from a2cm_phys.training.runs import model_policy
 from a2cm_phys.training.trainer import Trainer
 
@@ -19,7 +19,7 @@ Z = 4.0
 def test_a2cm_learns_to_catch_faster_than_random(tmp_path: Path) -> None:
     scenario = load_scenario("grid")
     cfg = load_train({"num_envs": 16, "updates": 60_000 // 128, "seed": 0})
-    trainer = Trainer(scenario, cfg, tmp_path, record=False)
+    trainer = Trainer(scenario, resolve_train(scenario, cfg), tmp_path, record=False)
     assert trainer.run() == "done"
 
     trained = play(scenario, model_policy(trainer.model), 2000, seed=1).lengths

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from a2cm_phys.commands.train import EXIT_INTERRUPTED, main
-from a2cm_phys.config import ConfigError, load_scenario, load_train
+from a2cm_phys.config import ConfigError, load_scenario, load_train, resolve_train
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.training import checkpoint
 from a2cm_phys.training.opponents import LATEST, OpponentPool, Pairing, actor_weights
@@ -25,7 +25,8 @@ POOL = ("--set", "train.pool_every=2", "train.pool_size=2", "train.pool_latest=0
 
 
 def _pool(size: int = 3, latest: float = 0.5, seed: int = 0) -> OpponentPool:
-    pursuers, evader = make_teams(load_scenario("grid_vs"), load_train({**SMALL, "seed": seed}))
+    vs = load_scenario("grid_vs")
+    pursuers, evader = make_teams(vs, resolve_train(vs, load_train({**SMALL, "seed": seed})))
     assert evader is not None
     return OpponentPool(pursuers.model, evader.model, size, latest, seed)
 
@@ -98,7 +99,7 @@ def test_snapshots_are_copies_and_play_as_the_past_policy() -> None:
 def test_only_the_live_side_learns(tmp_path: Path) -> None:
     scenario = load_scenario("grid_vs")
     cfg = load_train({**SMALL, "updates": 12, "pool_every": 1, "pool_latest": 0.0})
-    trainer = Trainer(scenario, cfg, tmp_path, record=False)
+    trainer = Trainer(scenario, resolve_train(scenario, cfg), tmp_path, record=False)
     assert trainer.pool is not None and trainer.evader is not None
     teams = {"pursuers": trainer.model, "evader": trainer.evader.model}
     seen = set()
@@ -174,13 +175,14 @@ def test_bad_pool_values_name_the_key(key: str, value: float) -> None:
 def test_pool_needs_a_learned_evader(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cfg = load_train({**SMALL, "pool_every": 5})
     with pytest.raises(ConfigError, match=r"key 'pool_every'.*learned evader"):
-        Trainer(load_scenario("grid"), cfg, tmp_path, record=False)
+        resolve_train(load_scenario("grid"), cfg)
     logdir = tmp_path / "logs"
     args = ["--scenario", "grid_flee", "--set", "train.pool_every=5", "--logdir", str(logdir)]
     assert main(args) == 2
     assert "pool_every" in capsys.readouterr().err and not logdir.exists()
     # a scripted evader with the pool off trains as before (pool_every = 0 is the default)
-    trainer = Trainer(load_scenario("grid"), load_train({**SMALL, "updates": 1}), tmp_path)
+    grid = load_scenario("grid")
+    trainer = Trainer(grid, resolve_train(grid, load_train({**SMALL, "updates": 1})), tmp_path)
     assert trainer.pool is None
 
 
@@ -189,7 +191,7 @@ def test_exploitability_and_pairings_are_logged_with_a_pool(tmp_path: Path) -> N
 
     scenario = load_scenario("grid_vs", {"size": 3, "pursuers": 2, "max_steps": 50})
     cfg = load_train({**SMALL, "updates": 6, "exploit_every": 3, "pool_every": 1})
-    trainer = Trainer(scenario, cfg, tmp_path)
+    trainer = Trainer(scenario, resolve_train(scenario, cfg), tmp_path)
     assert trainer.run() == "done"
     updates = read_run(tmp_path).updates
     assert [u["update"] for u in updates] == [1, 2, 3, 4, 5, 6]

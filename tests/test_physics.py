@@ -13,11 +13,12 @@ import pytest
 
 from a2cm_phys import make_env
 from a2cm_phys.config import load_scenario, scenario_names
-from a2cm_phys.envs import physics
+from a2cm_phys.envs import chipmunk, physics
 from a2cm_phys.envs.contacts import AGENT_WALL, PURSUER_EVADER, PURSUER_PURSUER
 from a2cm_phys.envs.physics import PhysicsCore
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.envs.workers import ProcessCore, WorkerError
+from a2cm_phys.envs.world import World, pair_table
 
 UP, DOWN, LEFT, RIGHT, STAY = range(5)
 PHYS = [name for name in scenario_names() if name.startswith("phys")]
@@ -231,7 +232,7 @@ def test_reset_rebuilds_the_world():
 
 
 def play_world(world, actions):
-    """Drive a :class:`physics.World` directly (every agent, evader included, follows
+    """Drive a :class:`World` directly (every agent, evader included, follows
     ``actions``); per step each body's position and velocity and the new contacts."""
     velocity = [tuple(map(float, v)) for v in physics.ACTION_DELTAS]
     trace = []
@@ -250,31 +251,31 @@ def test_a_rebuilt_world_is_a_new_world():
     exactly as a world that was never used: nothing (contact cache, servo impulses, the
     solver's position correction) carries over."""
     sc = load_scenario("phys_collision_continue")
-    table, start = physics._pair_table(sc), physics.start_positions(sc)
+    table, start = pair_table(sc), physics.start_positions(sc)
     rng = np.random.default_rng(4)
-    recycled = physics.World(sc, start, table)
+    recycled = World(sc, start, table)
     for episode in range(60):
         actions = rng.integers(0, 5, (int(rng.integers(1, 30)), sc.pursuers + 1))
         if episode % 3 == 0:  # everyone the same way: a pile-up against a wall
             actions[:] = rng.integers(0, 4)
         recycled.rebuild(start)
-        assert play_world(recycled, actions) == play_world(
-            physics.World(sc, start, table), actions
-        ), f"episode {episode}"
+        assert play_world(recycled, actions) == play_world(World(sc, start, table), actions), (
+            f"episode {episode}"
+        )
 
 
 def test_servos_read_only_the_control_bodies_velocity():
     """The control bodies stay outside the space, so their positions never move: the servo
     joints must not depend on them (anchors at the centres, max_bias = 0)."""
     sc = load_scenario("phys_collision_continue")
-    table, start = physics._pair_table(sc), physics.start_positions(sc)
+    table, start = pair_table(sc), physics.start_positions(sc)
     actions = np.random.default_rng(5).integers(0, 5, (40, sc.pursuers + 1))
     actions[:15] = RIGHT  # a pile-up against the right wall first
-    moved = physics.World(sc, start, table)
+    moved = World(sc, start, table)
     assert all(control.space is None for control in moved.controls)
     for i, control in enumerate(moved.controls):
         control.position = (40.0 + i, -7.0 * i)  # far from the bodies they drive
-    assert play_world(moved, actions) == play_world(physics.World(sc, start, table), actions)
+    assert play_world(moved, actions) == play_world(World(sc, start, table), actions)
 
 
 def test_worlds_built_ahead_are_the_same_as_worlds_built_at_reset():
@@ -284,7 +285,7 @@ def test_worlds_built_ahead_are_the_same_as_worlds_built_at_reset():
     while ahead.build_spare() < 50:  # more than the rollout's resets: every one uses a spare
         pass
     traces = [rollout(core, seeds, 150, 6) for core in (ahead, PhysicsCore(sc, 4))]
-    assert len(ahead._spares) < 50  # spares were used
+    assert ahead.spare_worlds < 50  # spares were used
     for (pos_a, obs_a, out_a), (pos_b, obs_b, out_b) in zip(*traces, strict=True):
         np.testing.assert_array_equal(pos_a, pos_b)
         np.testing.assert_array_equal(obs_a, obs_b)
@@ -312,7 +313,7 @@ def test_direct_calls_are_bit_identical_to_pymunks_api(monkeypatch):
     fast = rollout(fast_core, seeds, 300, 2)
     assert sum(len(game) for _, _, out in fast for game in out.events) > 20
     assert not lookups
-    monkeypatch.setattr(physics, "DIRECT_CALLS", False)
+    monkeypatch.setattr(chipmunk, "DIRECT_CALLS", False)
     slow_core = PhysicsCore(sc, 3)
     assert not isinstance(slow_core._worlds[0].step, partial)  # pymunk's own Space.step
     slow = rollout(slow_core, seeds, 300, 2)

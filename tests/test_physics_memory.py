@@ -1,4 +1,4 @@
-"""The physics core's direct paths (``physics.DIRECT_CALLS``): bodies read and steered through
+"""The physics core's direct paths (``chipmunk.DIRECT_CALLS``): bodies read and steered through
 chipmunk's memory, contacts reported by C callbacks in chipmunk's own handler. Each must give
 exactly the trajectories of pymunk's API."""
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from a2cm_phys.config import load_scenario
-from a2cm_phys.envs import physics
+from a2cm_phys.envs import chipmunk
 from a2cm_phys.envs.physics import PhysicsCore
 
 
@@ -47,20 +47,20 @@ def rollout(core: PhysicsCore, steps: int, seed: int) -> list:
 
 def test_the_body_layout_is_known_to_this_chipmunk():
     """Else the direct path would silently fall back to per-body calls."""
-    assert physics._body_layout()
+    assert chipmunk.body_layout()
 
 
 @pytest.mark.parametrize("name", ["phys_cont_collision", "phys_cont_flee", "phys_flee"])
 def test_memory_access_and_c_callbacks_match_pymunks_api(name, monkeypatch):
     sc = load_scenario(name)
     fast = PhysicsCore(sc, 6)
-    assert fast._addresses is not None
+    assert fast._worlds.addresses is not None
     assert all(world._hooked is not None for world in fast._worlds)
     ours = rollout(fast, 300, 3)
     assert fast.spare_worlds < 50
-    monkeypatch.setattr(physics, "DIRECT_CALLS", False)
+    monkeypatch.setattr(chipmunk, "DIRECT_CALLS", False)
     slow = PhysicsCore(sc, 6)
-    assert slow._addresses is None
+    assert slow._worlds.addresses is None
     assert all(world._hooked is None for world in slow._worlds)
     theirs = rollout(slow, 300, 3)
     events = 0
@@ -85,7 +85,7 @@ def test_spare_worlds_move_the_memory_view():
         core.build_spare()
     core.reset(np.array([1]), np.array([5], dtype=np.uint64))
     taken = core._worlds[1]
-    np.testing.assert_array_equal(core._addresses[1], taken.addresses)
+    np.testing.assert_array_equal(core._worlds.addresses[1], taken.addresses)
     core.step(np.full((2, sc.pursuers, 2), 0.5))
     read = core.positions()[1]
     np.testing.assert_array_equal(read, [tuple(body.position) for body in taken.bodies])

@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from a2cm_phys.commands.train import main
-from a2cm_phys.config import load_scenario, load_train
+from a2cm_phys.config import load_scenario, load_train, resolve_train
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.training import checkpoint
 from a2cm_phys.training.rollout import collect
@@ -25,7 +25,7 @@ CONSTANT_LR = ("--set", "train.lr_schedule=constant")  # an extended run: the sa
 
 def test_both_teams_collect_their_own_actions_and_rewards() -> None:
     scenario = load_scenario("grid_vs")
-    cfg = load_train({"num_envs": 4, "batch_size": 32})
+    cfg = resolve_train(scenario, load_train({"num_envs": 4, "batch_size": 32}))
     pursuers, evader = make_teams(scenario, cfg)
     assert evader is not None and evader.model.n_agents == 1 and evader.model.n_critics == 1
     env = VectorEnv(scenario, 4)
@@ -46,14 +46,15 @@ def test_both_teams_collect_their_own_actions_and_rewards() -> None:
 
 
 def test_scripted_evader_has_no_evader_team() -> None:
-    _, evader = make_teams(load_scenario("grid"), load_train({}))
+    grid = load_scenario("grid")
+    _, evader = make_teams(grid, resolve_train(grid, load_train({})))
     assert evader is None
 
 
 def test_one_run_trains_both_teams(tmp_path: Path) -> None:
     scenario = load_scenario("grid_vs")
     cfg = load_train({"num_envs": 4, "batch_size": 32, "updates": 5})
-    trainer = Trainer(scenario, cfg, tmp_path, record=False)
+    trainer = Trainer(scenario, resolve_train(scenario, cfg), tmp_path, record=False)
     assert trainer.evader is not None
     before = [p.detach().clone() for p in trainer.evader.model.parameters()]
     assert trainer.run() == "done"
@@ -115,7 +116,7 @@ def test_self_play_resumes_bit_for_bit(tmp_path: Path, opponents: tuple[str, ...
 def test_exploitability_is_logged_every_k_updates_on_small_grids(tmp_path: Path) -> None:
     scenario = load_scenario("grid_vs", {"size": 3, "pursuers": 2, "max_steps": 50})
     cfg = load_train({"num_envs": 4, "batch_size": 32, "updates": 4, "exploit_every": 2})
-    trainer = Trainer(scenario, cfg, tmp_path, record=False)
+    trainer = Trainer(scenario, resolve_train(scenario, cfg), tmp_path, record=False)
     seen = []
     update = trainer._one_update
 

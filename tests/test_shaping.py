@@ -11,7 +11,7 @@ import pytest
 from a2cm_phys.algos import Learner, make_model
 from a2cm_phys.algos.shaping import ProgressShaping
 from a2cm_phys.algos.voronoi import cell_area
-from a2cm_phys.config import ConfigError, Train, load_scenario, load_train
+from a2cm_phys.config import ConfigError, Train, load_scenario, load_train, resolve_train
 
 
 def _obs(scenario, pursuers, evader):
@@ -176,7 +176,7 @@ def test_one_potential_call_equals_row_by_row():
 
 def test_learner_adds_shaping_to_the_time_component_only():
     sc = load_scenario("phys_cont")
-    cfg = Train(num_envs=2, batch_size=4, distance_shaping=1.0)
+    cfg = resolve_train(sc, Train(num_envs=2, batch_size=4, distance_shaping=1.0))
     model = make_model(cfg, sc)
     learner = Learner(model, cfg, shaping=lambda b: np.full((2, 2), 5.0))
     parts = np.zeros((2, 2, 2))
@@ -196,7 +196,6 @@ def test_bad_coefficient_names_the_key():
 
 
 def test_default_shaping_is_resolved_per_control_type(tmp_path):
-    from a2cm_phys.config import resolve_train
     from a2cm_phys.training.trainer import Trainer
 
     assert Train().distance_shaping is None and Train().area_shaping is None
@@ -216,10 +215,12 @@ def test_default_shaping_is_resolved_per_control_type(tmp_path):
     assert (collision.distance_shaping, collision.area_shaping) == (1000.0, 2000.0)
     free = load_scenario("phys_cont", {"rewards": {"step": 0.0, "capture": 5.0}})
     assert resolve_train(free, Train()).distance_shaping == 1.0  # a free step: unit 1
-    trainer = Trainer(load_scenario("grid"), Train(updates=1), tmp_path, record=False)
+    grid = load_scenario("grid")
+    trainer = Trainer(grid, resolve_train(grid, Train(updates=1)), tmp_path, record=False)
     assert trainer.cfg.distance_shaping == 0.0 and trainer.learner.shaping is None
     trainer.close()
-    trainer = Trainer(load_scenario("phys_cont"), Train(updates=1), tmp_path, record=False)
+    cont = load_scenario("phys_cont")
+    trainer = Trainer(cont, resolve_train(cont, Train(updates=1)), tmp_path, record=False)
     shaping = trainer.learner.shaping
     assert shaping.scale == pytest.approx(5 / 0.1) and shaping.area_scale == pytest.approx(4.0)
     trainer.close()
@@ -253,7 +254,7 @@ def test_run_config_records_the_shaping_the_learner_saw(tmp_path):
 
 
 def test_runs_written_before_the_options_read_as_without_them():
-    from a2cm_phys.config import resolve_train, stored_train
+    from a2cm_phys.config import stored_train
 
     old = {k: v for k, v in dataclasses.asdict(Train()).items()}
     for key in ("distance_shaping", "area_shaping", "mean_bound_coef", "pool_every",

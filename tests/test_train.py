@@ -18,7 +18,7 @@ import torch
 from a2cm_phys.algos import NonFiniteLoss
 from a2cm_phys.algos.learner import Learner
 from a2cm_phys.commands.train import EXIT_INTERRUPTED, EXIT_NONFINITE, main
-from a2cm_phys.config import load_scenario, load_train, preset, scenario_names
+from a2cm_phys.config import load_scenario, load_train, preset, resolve_train, scenario_names
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.training import checkpoint
 from a2cm_phys.training.trainer import Trainer
@@ -166,7 +166,7 @@ def test_same_seed_same_run_different_seed_differs(tmp_path: Path) -> None:
     def weights(seed: int, name: str) -> list[torch.Tensor]:
         cfg = load_train({"num_envs": 4, "batch_size": 32, "updates": 5, "seed": seed})
         (tmp_path / name).mkdir()
-        trainer = Trainer(sc, cfg, tmp_path / name, record=False)
+        trainer = Trainer(sc, resolve_train(sc, cfg), tmp_path / name, record=False)
         assert trainer.run() == "done"
         return [p.detach().clone() for p in trainer.model.parameters()]
 
@@ -182,7 +182,7 @@ def test_model_has_n_actors_and_right_number_of_critics(
 ) -> None:
     sc = load_scenario("grid")
     options = {**(preset("paper") if paper else {}), "algo": algo}
-    trainer = Trainer(sc, load_train(options), tmp_path, record=False)
+    trainer = Trainer(sc, resolve_train(sc, load_train(options)), tmp_path, record=False)
     model, d, h, a, n = trainer.model, sc.obs_dim, 128, sc.actions, sc.pursuers
     k = 1 if paper else 2  # ours values the time and collision components apart
     assert model.n_agents == n and model.n_critics == critics and model.n_values == k
@@ -302,6 +302,7 @@ def test_a_resumed_run_continues_its_episode_log(tmp_path, monkeypatch):
 def test_trainer_creates_a_missing_run_directory(tmp_path: Path) -> None:
     """The Python API needs no mkdir first: run() makes the directory it saves into."""
     run_dir = tmp_path / "not" / "yet" / "there"
-    trainer = Trainer(load_scenario("grid"), load_train({"updates": 2}), run_dir, record=False)
+    grid = load_scenario("grid")
+    trainer = Trainer(grid, resolve_train(grid, load_train({"updates": 2})), run_dir, record=False)
     assert trainer.run() == "done"
     assert (run_dir / checkpoint.CHECKPOINT_NAME).is_file()

@@ -23,13 +23,17 @@ one per agent: the only difference). An update is a sequence of small pieces:
 4. **loss** ``Σ_i [−mean(A_i · log π_i(a_i|s)) − entropy_coef · H(π_i)] + value_coef ·
    Σ_c MSE_c`` (critics regress their normalised targets; ``entropy_coef`` annealed
    linearly to 0 when ``entropy_schedule = "linear"``), plus for Gaussian actors
-   ``mean_bound_coef`` times a soft bound on their means (:func:`mean_bound_loss`), and one
-   optimiser step (RMSprop as Keras has it, the paper's, or Adam), with optional gradient
-   clipping.
+   ``mean_bound_coef`` times a soft bound on their means
+   (:func:`~a2cm_phys.algos.losses.mean_bound_loss`), and one optimiser step (RMSprop as
+   Keras has it, the paper's, or Adam), with optional gradient clipping.
 
 Rewards arrive raw (the team reward, or its components ``reward_parts``), get an optional
 shaping term (:mod:`~a2cm_phys.algos.shaping`) and are multiplied by ``reward_scale`` here:
 what the learner sees is documented in the run's config.
+
+The pieces live beside this module: the batch's rewards, values and advantages in
+:mod:`.targets`, the loss in :mod:`.losses`, the optimiser and the gradient in
+:mod:`.optimizer`; :class:`Learner` holds the state between updates and runs them in order.
 """
 
 from __future__ import annotations
@@ -42,59 +46,26 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
-from ..config import PRESETS
+from .losses import Losses, NonFiniteLoss, a2c_losses, entropy_coef, loss_metrics
 from .normalize import ValueNorm
-from .returns import gae
-from .rmsprop import KerasRMSprop
+from .optimizer import backpropagate, make_optimizer, set_learning_rate
+from .targets import (
+    actor_advantage,
+    advantages_and_targets,
+    critic_values,
+    dual_ascent,
+    scaled_rewards,
+)
 
 if TYPE_CHECKING:
     from ..config import Train
     from .models import ActorCritic
 
+__all__ = ["BATCH_KEYS", "Learner", "NonFiniteLoss", "make_optimizer"]
+
 BATCH_KEYS = ("obs", "actions", "rewards", "terminated", "truncated", "final_obs", "next_obs")
 """Keys :meth:`Learner.update` reads from a batch (all time-major except ``next_obs``); a
 batch may add ``reward_parts (T, B, K)``, the reward's components, for ``split_rewards``."""
-
-
-MEAN_BOUND = 1.1
-"""Where the soft bound on Gaussian means starts: a little past the command box's ±1, so a
-mean can still command full speed along an axis."""
-
-
-def mean_bound_loss(means: torch.Tensor) -> torch.Tensor:
-    """``Σ_agents,dims mean_batch [relu(μ − b)² + relu(−μ − b)²]`` with ``b = MEAN_BOUND``.
-
-    A Gaussian actor's unbounded mean drifts past the env's clip under the optimiser's
-    noise; there every sample is clipped to the same command and the gradient carries no
-    information about the game (measured: against a static evader the means ran to −25 and
-    the team never captured). This soft bound (rl_games' ``bounds_loss``) pulls them back
-    without squashing, so log-probabilities stay those of the plain Gaussian.
-    ``means``: ``(T, B, N, dim)``.
-    """
-    over = (means - MEAN_BOUND).clamp(min=0) ** 2 + (means + MEAN_BOUND).clamp(max=0) ** 2
-    return over.mean(dim=(0, 1)).sum()
-
-
-class NonFiniteLoss(FloatingPointError):
-    """The loss or its gradient was NaN/inf; the optimiser was NOT stepped.
-
-    The model and optimiser are exactly as before the failed :meth:`Learner.update`, so a
-    trainer can stop and keep its last good checkpoint. ``metrics`` holds what was computed.
-    """
-
-    def __init__(self, message: str, metrics: dict[str, float]) -> None:
-        super().__init__(message)
-        self.metrics = metrics
-
-
-def make_optimizer(model: torch.nn.Module, cfg: Train) -> torch.optim.Optimizer | KerasRMSprop:
-    """RMSprop as the paper's Keras has it (non-centred, no momentum, eps outside the
-    square root: torch's RMSprop with ``alpha = rho``, :mod:`.rmsprop`), or Adam."""
-    if cfg.optimizer == "adam":
-        return torch.optim.Adam(model.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
-    return KerasRMSprop(
-        model.parameters(), lr=cfg.lr, alpha=cfg.rmsprop_alpha, eps=cfg.rmsprop_eps
-    )
 
 
 class Learner:
@@ -103,9 +74,10 @@ class Learner:
     Args:
         model: the network to train (its ``n_critics`` decides A2C vs A2CM behaviour and
             its ``n_values`` the number of reward components).
-        train_cfg: ``lr``, ``optimizer`` and its constants, ``gamma``, ``gae_lambda``,
-            ``entropy_coef``, ``value_coef``, ``reward_scale``, ``max_grad_norm``,
-            ``normalize_advantages``, ``value_norm``, ``split_rewards``.
+        train_cfg: a resolved config (:func:`~a2cm_phys.config.resolve_train`): ``lr``,
+            ``optimizer`` and its constants, ``gamma``, ``gae_lambda``, ``entropy_coef``,
+            ``value_coef``, ``reward_scale``, ``max_grad_norm``, ``normalize_advantages``,
+            ``value_norm``, ``split_rewards``.
         shaping: optional shaping term ``shaping(batch) -> (T, B)`` added to the (first)
             reward component before scaling, e.g.
             :class:`~a2cm_phys.algos.shaping.ProgressShaping`.
@@ -119,8 +91,7 @@ class Learner:
     ) -> None:
         self.model = model
         self.cfg = train_cfg
-        entropy = train_cfg.entropy_coef  # None: unresolved (no scenario), the paper's value
-        self.entropy_coef = PRESETS["paper"]["entropy_coef"] if entropy is None else entropy
+        self.entropy_coef = train_cfg.entropy_coef
         self.shaping = shaping
         self.optimizer = make_optimizer(model, train_cfg)
         self.device = next(model.parameters()).device
@@ -154,151 +125,74 @@ class Learner:
             NonFiniteLoss: the loss or the gradient norm is NaN/inf (no step was taken).
         """
         cfg, model = self.cfg, self.model
-        dev = self.device
-        obs = torch.as_tensor(np.asarray(batch["obs"]), device=dev, dtype=torch.float32)
-        n_steps, n_envs = obs.shape[:2]
-        term = np.asarray(batch["terminated"], dtype=bool)
-        trunc = np.asarray(batch["truncated"], dtype=bool)
-        rewards = self._rewards(batch)  # (T, B, 1 or K), scaled, float64
-
-        with torch.no_grad():  # targets: every value the batch needs, in one forward
-            next_obs = torch.as_tensor(np.asarray(batch["next_obs"]), device=dev).float()
-            final = torch.as_tensor(np.asarray(batch["final_obs"])[trunc], device=dev).float()
-            flat = torch.cat([obs.reshape(n_steps * n_envs, -1), next_obs, final])
-            every = self._to_reward_units(self._critic(flat))  # (rows, C, K)
-            values = every[: n_steps * n_envs].unflatten(0, (n_steps, n_envs))
-            extra = every[n_steps * n_envs :]
-            next_values = torch.empty_like(values)
-            next_values[:-1] = values[1:]
-            next_values[-1] = extra[:n_envs]
-            next_values[torch.as_tensor(trunc, device=dev)] = extra[n_envs:]
-            adv = gae(  # (T, B, C, K)
-                rewards[:, :, None, :],
-                values.cpu().numpy(),
-                next_values.cpu().numpy(),
-                term,
-                trunc,
-                cfg.gamma,
-                cfg.gae_lambda,
-            )
-            if not np.isfinite(adv).all():  # before anything (normaliser, λ) changes
-                raise NonFiniteLoss(
-                    "non-finite returns (no step taken)", {"loss": math.nan, "grad_norm": math.nan}
-                )
-            returns = torch.as_tensor(adv, device=dev) + values.double()
-            if self.value_norm is not None:  # rescales the output layer (PopArt)
-                self.value_norm.update(returns, model.critic_out)
-                targets = self.value_norm.normalize(returns).float()
-            else:
-                targets = returns.float()
-            actor_adv = self._actor_advantage(torch.as_tensor(adv, device=dev))  # (T,B,C)
-            if cfg.constrain_collisions:  # dual ascent on λ (after it weighed this batch)
-                rate = float(np.mean(batch["collisions"]))
-                self.multiplier = max(
-                    0.0, self.multiplier + cfg.lagrange_lr * (rate - cfg.collision_budget)
-                )
-
-        out = self._critic(obs)  # (T, B, C, K), with gradient
-        dist_out = model.actor_outputs(obs)
-        dist = model.dist.torch(dist_out, model.log_std)
-        actions = torch.as_tensor(np.asarray(batch["actions"]), device=dev)
-        if model.log_std is None:
-            actions = actions.long()
-        log_prob = dist.log_prob(actions)  # (T, B, N)
-        entropy = dist.entropy()  # (T, B, N)
-        policy_loss = -(actor_adv * log_prob).mean(dim=(0, 1)).sum()
-        entropy_sum = entropy.mean(dim=(0, 1)).sum()
-        value_loss = (targets - out).pow(2).mean(dim=(0, 1)).sum()
-        entropy_coef = self.entropy_coef
-        if cfg.entropy_schedule == "linear":  # None: unresolved, the paper's constant
-            entropy_coef *= 1.0 - progress
-        loss = policy_loss - entropy_coef * entropy_sum + cfg.value_coef * value_loss
-        if model.log_std is not None and cfg.mean_bound_coef:  # None (unresolved): off
-            loss = loss + cfg.mean_bound_coef * mean_bound_loss(dist_out)
-
-        p_loss, v_loss, ent, total = torch.stack(
-            [policy_loss, value_loss, entropy_sum, loss]
-        ).tolist()
-        metrics = {
-            "policy_loss": p_loss,
-            "value_loss": v_loss,
-            "entropy": ent / model.n_agents,
-            "mean_advantage": float(adv.mean()),
-            "loss": total,
-            "grad_norm": math.nan,
-        }
+        obs = torch.as_tensor(np.asarray(batch["obs"]), device=self.device, dtype=torch.float32)
+        adv, targets, actor_adv = self._targets(batch, obs)
+        losses = a2c_losses(
+            model,
+            self._critic,
+            obs,
+            batch["actions"],
+            actor_adv,
+            targets,
+            entropy_coef=entropy_coef(self.entropy_coef, cfg.entropy_schedule, progress),
+            value_coef=cfg.value_coef,
+            mean_bound_coef=cfg.mean_bound_coef,
+        )
+        metrics = loss_metrics(losses, adv, model.n_agents)
         if cfg.constrain_collisions:
             metrics["multiplier"] = self.multiplier
-        if not math.isfinite(total):
-            raise NonFiniteLoss(f"non-finite loss {total} (no step taken)", metrics)
-        model.zero_grad(set_to_none=True)  # the optimiser's own adds a profiler span
-        loss.backward()
-        params = [p for p in model.parameters() if p.grad is not None]
-        if cfg.max_grad_norm:  # 0, or None (not resolved for a scenario): no clipping
-            norm = torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
-        else:
-            norm = torch.nn.utils.get_total_norm([p.grad for p in params])
-        metrics["grad_norm"] = norm.item()
+        if not math.isfinite(metrics["loss"]):
+            raise NonFiniteLoss(f"non-finite loss {metrics['loss']} (no step taken)", metrics)
+        self._step(losses, metrics, progress)
+        return metrics
+
+    # ------------------------------------------------------------------ pieces
+    def _targets(
+        self, batch: Mapping[str, Any], obs: torch.Tensor
+    ) -> tuple[np.ndarray, torch.Tensor, torch.Tensor]:
+        """The batch's component advantages ``(T, B, C, K)`` (reward units), the critics'
+        targets and the actors' advantage ``(T, B, C)``; moves the value normaliser and the
+        multiplier on by this batch."""
+        rewards = self._rewards(batch)  # (T, B, 1 or K), scaled, float64
+        with torch.no_grad():
+            adv, targets = advantages_and_targets(
+                self._values, obs, batch, rewards, self.cfg, self.value_norm, self.model.critic_out
+            )
+            actor_adv = self._actor_advantage(torch.as_tensor(adv, device=self.device))
+            if self.cfg.constrain_collisions:  # dual ascent on λ (after it weighed this batch)
+                self.multiplier = dual_ascent(self.multiplier, batch["collisions"], self.cfg)
+        return adv, targets, actor_adv
+
+    def _step(self, losses: Losses, metrics: dict[str, float], progress: float) -> None:
+        """Backpropagate, record the gradient norm in ``metrics`` and step the optimiser
+        (at the scheduled learning rate), unless the norm is NaN/inf."""
+        cfg = self.cfg
+        metrics["grad_norm"] = backpropagate(self.model, losses.total, cfg.max_grad_norm)
         if not math.isfinite(metrics["grad_norm"]):
             self.optimizer.zero_grad(set_to_none=True)
             raise NonFiniteLoss(
                 f"non-finite gradient norm {metrics['grad_norm']} (no step taken)", metrics
             )
         if cfg.lr_schedule == "linear":
-            for group in self.optimizer.param_groups:
-                group["lr"] = cfg.lr * (1.0 - progress)
+            set_learning_rate(self.optimizer, cfg.lr * (1.0 - progress))
         self.optimizer.step()
-        return metrics
 
-    # ------------------------------------------------------------------ pieces
     def _rewards(self, batch: Mapping[str, Any]) -> np.ndarray:
-        """Scaled rewards ``(T, B, K)``: the components if the model has K values, else
-        the team reward as one component. Under the collision constraint the second
-        component is minus the collision count (the constraint's cost), not the penalty."""
-        if self.cfg.constrain_collisions:
-            parts = np.asarray(batch["reward_parts"], dtype=np.float64).copy()
-            parts[..., 1] = -np.asarray(batch["collisions"], dtype=np.float64)
-        elif self.model.n_values > 1:
-            parts = np.asarray(batch["reward_parts"], dtype=np.float64)
-            if parts.shape[-1] != self.model.n_values:
-                raise ValueError(
-                    f"reward_parts has {parts.shape[-1]} components, the critics predict "
-                    f"{self.model.n_values}"
-                )
-        else:
-            parts = np.asarray(batch["rewards"], dtype=np.float64)[..., None]
-        if self.shaping is not None:  # added to the time component (a new array: the
-            parts = parts.copy()  # batch's own rewards stay raw)
-            parts[..., 0] += self.shaping(batch)
-        return parts * self.cfg.reward_scale
+        """Scaled rewards ``(T, B, K)``, :func:`~a2cm_phys.algos.targets.scaled_rewards`."""
+        return scaled_rewards(batch, self.cfg, self.model.n_values, self.shaping)
 
     def _critic(self, obs: torch.Tensor) -> torch.Tensor:
         """Critic outputs ``(..., C, K)`` (normalised units when ``value_norm``)."""
-        out = self.model.value(obs)
-        return out if self.model.n_values > 1 else out.unsqueeze(-1)
+        return critic_values(self.model, obs)
 
-    def _to_reward_units(self, out: torch.Tensor) -> torch.Tensor:
-        """Critic outputs ``(..., K)`` as values in (scaled) reward units."""
+    def _values(self, obs: torch.Tensor) -> torch.Tensor:
+        """Critic outputs ``(..., C, K)`` as values in (scaled) reward units."""
+        out = self._critic(obs)
         return out if self.value_norm is None else self.value_norm.denormalize(out)
 
     def _actor_advantage(self, adv: torch.Tensor) -> torch.Tensor:
         """``(T, B, C, K)`` component advantages → ``(T, B, C)`` advantage of the actors."""
-        if self.cfg.split_rewards and self.cfg.balance_rewards and self.value_norm is not None:
-            _, std = self.value_norm.stats()
-            weight = torch.ones_like(std)
-            weight[..., 1:] = self.cfg.collision_weight  # the collision component
-            adv = adv * (weight / std).to(adv.dtype)
-        if self.cfg.constrain_collisions:  # time + λ·(minus collisions), both normalised
-            lam = self.multiplier
-            combined = (adv[..., 0] + lam * adv[..., 1]) / (1.0 + lam)
-        else:
-            combined = adv.sum(-1)
-        if self.cfg.normalize_advantages and len(combined) * combined.shape[1] > 1:
-            # per critic: A2C's actor i sees only its own critic's advantages
-            mean = combined.mean(dim=(0, 1), keepdim=True)
-            std = combined.std(dim=(0, 1), keepdim=True)
-            combined = (combined - mean) / (std + 1e-8)
-        return combined.float()
+        return actor_advantage(adv, self.cfg, self.value_norm, self.multiplier)
 
     # ------------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict[str, Any]:

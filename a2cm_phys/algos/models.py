@@ -3,14 +3,15 @@
 Every agent of a team observes the same global state, so one input row feeds all N actors
 and all critics. Each actor is ``Linear(obs, hidden) → ReLU → Linear(hidden, n_outputs)``
 and each critic ``Linear(obs, hidden) → ReLU → Linear(hidden, n_values)`` (the paper's
-networks, SPEC §6). The N actors (and A2C's N critics) live in :class:`StackedLinear`
-layers whose parameters carry a leading agent dimension, so all of them are evaluated in
-one batched op, not a Python loop.
+networks, SPEC §6). The N actors (and A2C's N critics) live in
+:class:`~a2cm_phys.algos.layers.StackedLinear` layers whose parameters carry a leading agent
+dimension, so all of them are evaluated in one batched op, not a Python loop.
 
 Two options go beyond the paper (``Train.layers``, ``Train.encoding``): more hidden layers
 of the same width, and, on grids, the input as one one-hot of each coordinate's cell
-(:class:`OneHotCells`) instead of the coordinates themselves. With the defaults (one layer,
-the raw observation) the networks are the paper's, weight for weight.
+(:class:`~a2cm_phys.algos.encoding.OneHotCells`) instead of the coordinates themselves.
+With the defaults (one layer, the raw observation) the networks are the paper's, weight for
+weight.
 
 - **A2C** (``shared_critic=False``): N actors and N critics, critic i learns agent i's returns.
 - **A2CM** (``shared_critic=True``): N actors and ONE critic trained on the team return.
@@ -22,18 +23,17 @@ the :mod:`~a2cm_phys.algos.distributions` object's business: logits of a categor
 (``n_values``): one per reward component, when the learner splits the team reward.
 
 For rollouts :meth:`ActorCritic.act` computes the actor outputs from a numpy snapshot of
-the actor weights (several times faster than torch for 1–64 rows), refreshed automatically
-whenever the torch parameters change in place (optimiser step, ``load_state_dict``).
+the actor weights (:class:`~a2cm_phys.algos.snapshot.ActorSnapshot`, several times faster
+than torch for 1–64 rows), refreshed automatically whenever the torch parameters change in
+place (optimiser step, ``load_state_dict``).
 """
 
 from __future__ import annotations
 
-import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from torch import distributions as D
 from torch import nn
 
@@ -44,86 +44,14 @@ from .distributions import (
     GaussianActions,
     sample_categorical,
 )
+from .encoding import OneHotCells
+from .layers import StackedLinear, stacked_mlp
+from .snapshot import ActorSnapshot
 
 if TYPE_CHECKING:
     from ..config import Scenario, Train
 
 __all__ = ["ActorCritic", "OneHotCells", "StackedLinear", "make_model", "sample_categorical"]
-
-
-class OneHotCells:
-    """A grid observation (SPEC §5: every coordinate divided by ``size − 1``) as one one-hot
-    vector of ``size`` per coordinate: ``(..., d) → (..., d · size)``. A network then tells
-    "next to the evader" from "two cells away" with one weight per cell, where the raw
-    coordinates make it carve the arena with ReLUs."""
-
-    def __init__(self, size: int) -> None:
-        if size < 2:
-            raise ValueError(f"one-hot cells need an arena of size >= 2, got {size}")
-        self.size = size
-        self._eye = np.eye(size, dtype=np.float32)
-
-    def features(self, obs_dim: int) -> int:
-        """Length of the encoded input."""
-        return obs_dim * self.size
-
-    def torch(self, obs: torch.Tensor) -> torch.Tensor:
-        """Encode a float tensor of observations."""
-        cells = torch.round(obs * (self.size - 1)).long().clamp_(0, self.size - 1)
-        return F.one_hot(cells, self.size).to(obs.dtype).flatten(-2)
-
-    def numpy(self, obs: np.ndarray) -> np.ndarray:
-        """Encode observations in numpy (float32), as :meth:`torch` does."""
-        cells = np.rint(np.asarray(obs, dtype=np.float32) * (self.size - 1)).astype(np.intp)
-        np.clip(cells, 0, self.size - 1, out=cells)
-        return self._eye[cells].reshape(*cells.shape[:-1], -1)
-
-
-class StackedLinear(nn.Module):
-    """``n`` independent dense layers ``in_features → out_features`` with stacked parameters.
-
-    ``weight`` has shape ``(n, out_features, in_features)`` and ``bias`` ``(n, out_features)``;
-    slice ``i`` is initialised exactly as ``nn.Linear(in_features, out_features)`` would be
-    (kaiming-uniform weight with ``a=√5``, bias uniform in ``±1/√in_features``).
-    """
-
-    def __init__(
-        self,
-        n: int,
-        in_features: int,
-        out_features: int,
-        generator: torch.Generator | None = None,
-    ) -> None:
-        super().__init__()
-        self.n, self.in_features, self.out_features = n, in_features, out_features
-        self.weight = nn.Parameter(torch.empty(n, out_features, in_features))
-        self.bias = nn.Parameter(torch.empty(n, out_features))
-        self.reset_parameters(generator)
-
-    def reset_parameters(self, generator: torch.Generator | None = None) -> None:
-        """Initialise every slice like ``nn.Linear.reset_parameters``."""
-        bound = 1.0 / math.sqrt(self.in_features)
-        with torch.no_grad():
-            for i in range(self.n):
-                nn.init.kaiming_uniform_(self.weight[i], a=math.sqrt(5), generator=generator)
-                nn.init.uniform_(self.bias[i], -bound, bound, generator=generator)
-
-    def forward_shared(self, x: torch.Tensor) -> torch.Tensor:
-        """Apply all ``n`` layers to the same input: ``(..., in) → (..., n, out)`` (one matmul)."""
-        flat = F.linear(
-            x,
-            self.weight.reshape(self.n * self.out_features, self.in_features),
-            self.bias.reshape(self.n * self.out_features),
-        )
-        return flat.unflatten(-1, (self.n, self.out_features))
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Apply layer ``i`` to row ``i`` of the agent dim: ``(..., n, in) → (..., n, out)``."""
-        return torch.einsum("...ni,noi->...no", x, self.weight) + self.bias
-
-    def extra_repr(self) -> str:
-        """Shape summary shown by ``print(module)``."""
-        return f"n={self.n}, in_features={self.in_features}, out_features={self.out_features}"
 
 
 class ActorCritic(nn.Module):
@@ -165,12 +93,14 @@ class ActorCritic(nn.Module):
         self.shared_critic, self.n_values = shared_critic, n_values
         self.encoding = encoding
         inputs = obs_dim if encoding is None else encoding.features(obs_dim)
-        c = 1 if shared_critic else n_agents
+        c = critics(n_agents, shared_critic)
+        # The creation order is the draw order of ``generator``: the paper's two layers of
+        # the actors, then of the critics; layers beyond the first last, so that one layer
+        # draws the paper's weights.
         self.actor_hidden = StackedLinear(n_agents, inputs, hidden, generator)
         self.actor_out = StackedLinear(n_agents, hidden, dist.n_outputs, generator)
         self.critic_hidden = StackedLinear(c, inputs, hidden, generator)
         self.critic_out = StackedLinear(c, hidden, n_values, generator)
-        # Layers beyond the first are made last, so that one layer draws the paper's weights.
         self.actor_deep = nn.ModuleList(
             StackedLinear(n_agents, hidden, hidden, generator) for _ in range(layers - 1)
         )
@@ -182,9 +112,7 @@ class ActorCritic(nn.Module):
             if dist.has_log_std
             else None
         )
-        self._snapshot: tuple[Any, ...] | None = None
-        self._snapshot_key: tuple[int, ...] | None = None
-        self._cache_actor_params()
+        self._numpy_actors = self._snapshot()
 
     @property
     def n_critics(self) -> int:
@@ -196,22 +124,18 @@ class ActorCritic(nn.Module):
         """Actor outputs per agent (the number of discrete actions, or the command's size)."""
         return self.dist.n_outputs
 
-    # ------------------------------------------------------------------ torch forward
     @property
     def layers(self) -> int:
         """Hidden layers of every actor and critic."""
         return 1 + len(self.actor_deep)
 
+    # ------------------------------------------------------------------ torch forward
     def _input(self, obs: torch.Tensor) -> torch.Tensor:
         return obs if self.encoding is None else self.encoding.torch(obs)
 
     def actor_outputs(self, obs: torch.Tensor) -> torch.Tensor:
         """Actor outputs ``(..., N, n_outputs)`` (logits or means) for ``(..., obs_dim)``."""
-        h = F.relu(self.actor_hidden.forward_shared(self._input(obs)))
-        for layer in self.actor_deep:
-            h = F.relu(layer(h))
-        return self.actor_out(h)
-
+        return stacked_mlp(self.actor_hidden, self.actor_deep, self.actor_out, self._input(obs))
 
     def distribution(self, obs: torch.Tensor) -> D.Distribution:
         """The policy of every agent at ``obs``: a distribution of batch shape ``(..., N)``."""
@@ -219,10 +143,8 @@ class ActorCritic(nn.Module):
 
     def value(self, obs: torch.Tensor) -> torch.Tensor:
         """Critic outputs ``(..., C)``, or ``(..., C, n_values)`` when ``n_values > 1``."""
-        h = F.relu(self.critic_hidden.forward_shared(self._input(obs)))
-        for layer in self.critic_deep:
-            h = F.relu(layer(h))
-        out = self.critic_out(h)
+        x = self._input(obs)
+        out = stacked_mlp(self.critic_hidden, self.critic_deep, self.critic_out, x)
         return out.squeeze(-1) if self.n_values == 1 else out
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -246,28 +168,14 @@ class ActorCritic(nn.Module):
         out = self.outputs_np(obs)
         if greedy:
             return self.dist.greedy(out)
-        return self.dist.sample(out, self._snapshot_log_std, rng)
+        return self.dist.sample(out, self._numpy_actors.log_std, rng)
 
     def outputs_np(self, obs: np.ndarray) -> np.ndarray:
         """Actor outputs as numpy ``(B, N, n_outputs)`` (``(N, n_outputs)`` for 1-D ``obs``)."""
-        w1, b1, w2, b2, deep = self._numpy_snapshot()
         x = np.asarray(obs, dtype=np.float32)
         if self.encoding is not None:
             x = self.encoding.numpy(x)
-        h = x @ w1
-        h += b1
-        np.maximum(h, 0.0, out=h)
-        if deep:  # agent by agent: (N, B, H) through each agent's own weights
-            lead = h.shape[:-1]
-            h = np.moveaxis(h.reshape(-1, self.n_agents, self.hidden), 1, 0)
-            for w, b in deep:
-                h = np.matmul(h, w)
-                h += b
-                np.maximum(h, 0.0, out=h)
-            h = np.moveaxis(h, 0, 1).reshape(*lead, self.n_agents * self.hidden)
-        out = h @ w2
-        out += b2
-        return out.reshape(*out.shape[:-1], self.n_agents, self.dist.n_outputs)
+        return self._numpy_actors.outputs(x)
 
     def action_probs_np(self, obs: np.ndarray) -> np.ndarray:
         """Softmax action probabilities ``(B, N, A)`` of discrete actors, as numpy float64."""
@@ -279,65 +187,22 @@ class ActorCritic(nn.Module):
 
     def refresh_snapshot(self) -> None:
         """Rebuild the numpy copy of the actor weights used by :meth:`act` now."""
-        n, h, o = self.n_agents, self.hidden, self.dist.n_outputs
-        d = self.actor_hidden.in_features
-        with torch.no_grad():
-            t_w1, t_b1, t_w2, t_b2 = (p.detach().cpu().numpy() for p in self._actor_params[:4])
-            deep = [
-                (
-                    np.ascontiguousarray(layer.weight.detach().cpu().numpy().transpose(0, 2, 1)),
-                    layer.bias.detach().cpu().numpy()[:, None, :].copy(),
-                )
-                for layer in self.actor_deep
-            ]
-            log_std = self.log_std
-            self._snapshot_log_std = (
-                None if log_std is None else log_std.detach().cpu().numpy().copy()
-            )
-        # the second layer as one block-diagonal (N·H, N·O) matrix: a single small matmul
-        w2 = np.zeros((n * h, n * o), dtype=np.float32)
-        for i in range(n):
-            w2[i * h : (i + 1) * h, i * o : (i + 1) * o] = t_w2[i].T
-        self._snapshot = (
-            np.ascontiguousarray(t_w1.reshape(n * h, d).T),
-            t_b1.reshape(n * h).copy(),
-            w2,
-            t_b2.reshape(n * o).copy(),
-            deep,
-        )
-        self._snapshot_key = self._actor_versions()
-
-    def _actor_versions(self) -> tuple[int, ...]:
-        # In-place updates (optimiser steps, load_state_dict, no_grad copies) bump the
-        # version counter of a parameter, so a changed key means a stale snapshot.
-        return tuple(p._version for p in self._actor_params)
+        self._numpy_actors.refresh()
 
     def _apply(self, fn, *args, **kwargs):  # type: ignore[override]
         """Invalidate the numpy snapshot when parameters are moved or converted (``.to``)."""
         out = super()._apply(fn, *args, **kwargs)
-        self._cache_actor_params()
+        self._numpy_actors = self._snapshot()
         return out
 
-    def _cache_actor_params(self) -> None:
-        params = [
-            self.actor_hidden.weight,
-            self.actor_hidden.bias,
-            self.actor_out.weight,
-            self.actor_out.bias,
-        ]
-        for layer in self.actor_deep:
-            params += [layer.weight, layer.bias]
-        if self.log_std is not None:
-            params.append(self.log_std)
-        self._actor_params = tuple(params)
-        self._snapshot = None
-        self._snapshot_log_std = None
+    def _snapshot(self) -> ActorSnapshot:
+        return ActorSnapshot(self.actor_hidden, self.actor_out, self.actor_deep, self.log_std)
 
-    def _numpy_snapshot(self) -> tuple[Any, ...]:
-        if self._snapshot is None or self._snapshot_key != self._actor_versions():
-            self.refresh_snapshot()
-        assert self._snapshot is not None
-        return self._snapshot
+
+def critics(n_agents: int, shared_critic: bool) -> int:
+    """How many critics a team of ``n_agents`` has: A2CM's one shared critic, or A2C's one
+    per agent."""
+    return 1 if shared_critic else n_agents
 
 
 def action_distribution(scenario: Scenario) -> ActionDistribution:
@@ -356,7 +221,8 @@ def make_model(
     n_agents: int | None = None,
     shared_critic: bool | None = None,
 ) -> ActorCritic:
-    """Build the network ``train_cfg.algo`` asks for, sized by ``scenario``, on its device.
+    """Build the network a resolved ``train_cfg`` (:func:`~a2cm_phys.config.resolve_train`)
+    asks for, sized by ``scenario``, on its device.
 
     ``n_agents`` defaults to the scenario's pursuers and ``shared_critic`` to A2CM's (a
     team of one, such as a learned evader, passes its own). The initial weights come from
@@ -364,8 +230,6 @@ def make_model(
     (independent of the global torch RNG). With ``split_rewards`` each critic predicts one
     value per reward component (:data:`~a2cm_phys.envs.core.REWARD_PARTS`).
     """
-    from ..config import resolve_train
-
     if generator is None:
         generator = torch.Generator().manual_seed(train_cfg.seed)
     model = ActorCritic(
@@ -375,7 +239,7 @@ def make_model(
         train_cfg.hidden,
         shared_critic=train_cfg.algo == "a2cm" if shared_critic is None else shared_critic,
         n_values=len(REWARD_PARTS) if train_cfg.split_rewards else 1,
-        log_std_init=resolve_train(scenario, train_cfg).log_std_init,
+        log_std_init=train_cfg.log_std_init,
         generator=generator,
         layers=train_cfg.layers,
         encoding=OneHotCells(scenario.size) if train_cfg.encoding == "onehot" else None,

@@ -16,7 +16,7 @@ from ..base.errors import UserError
 from ..config import Scenario
 from ..envs.core import ACTION_NAMES
 from ..record.integrity import check_run_log
-from ..record.reader import RunLog, Trajectory
+from ..record.runlog import RunLog, Trajectory
 from ..record.schemas import step_seconds
 from ..training import checkpoint
 from ..training.rundir import SUMMARY_NAME

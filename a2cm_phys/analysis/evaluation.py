@@ -1,9 +1,10 @@
 """Play pursuers against an evader and measure (the ``evaluate`` command prints it):
 :func:`play` runs episodes of any two policies and returns every episode's outcome;
 :func:`optimum` is the exact oracle's figures for a grid scenario, and
-:func:`reference_report` the one reference every command, figure and the report compare
-against (the optimum on grids; the oracle driven in physics, or ``pursuit`` under
-continuous control)."""
+:func:`reference_of` the one reference every command, figure and the report compare
+against (:func:`reference_policy`: the optimum on grids; the oracle driven in physics, or
+``pursuit`` under continuous control). :func:`reference_report` is it as ``evaluate``
+reports it."""
 
 from __future__ import annotations
 
@@ -21,7 +22,16 @@ from ..envs.vector import VectorEnv
 from ..training.rollout import Policy
 from ..training.seeding import policy_rng
 
-__all__ = ["EvalResult", "optimum", "play", "reference_report"]
+__all__ = [
+    "REFERENCE_SEED",
+    "EvalResult",
+    "ReferenceResult",
+    "optimum",
+    "play",
+    "reference_of",
+    "reference_policy",
+    "reference_report",
+]
 
 
 @dataclass
@@ -108,19 +118,98 @@ def optimum(scenario: Scenario) -> dict[str, float] | None:
     }
 
 
+REFERENCE_SEED = 10_000
+"""Seed of a reference policy's episodes unless the caller gives one (apart from every
+training seed)."""
+
+
+def reference_policy(scenario: Scenario) -> str:
+    """The name of a scenario's reference policy: ``oracle`` (on grids its exact optimum;
+    in physics the grid oracle driven in the arena, discrete control) or ``pursuit``
+    (continuous control)."""
+    return "pursuit" if scenario.mode != "grid" and scenario.continuous else "oracle"
+
+
+@dataclass(frozen=True)
+class ReferenceResult:
+    """What a scenario's reference policy achieves: its exact optimum (``optimum``), its
+    episodes played (``played``), or why it cannot be had (``unavailable``)."""
+
+    policy: str
+    """The policy's name (``oracle``, ``pursuit``, …)."""
+    optimum: dict[str, float] | None = None
+    played: EvalResult | None = None
+    unavailable: str | None = None
+
+    @property
+    def exact(self) -> bool:
+        """Whether the figures are the exact optimum rather than played episodes."""
+        return self.optimum is not None
+
+    @property
+    def label(self) -> str:
+        """``optimum (exact oracle)``, ``NAME (played)``, or the name where unavailable."""
+        if self.optimum is not None:
+            return "optimum (exact oracle)"
+        if self.played is not None:
+            return f"{self.policy} (played)"
+        return self.policy
+
+    @property
+    def length(self) -> float:
+        """The mean episode length (the optimum's expected capture steps)."""
+        if self.optimum is not None:
+            return self.optimum["capture_steps"]
+        return float(self.played.lengths.mean())
+
+    @property
+    def ret(self) -> float:
+        """The mean return under the raw reward (the optimum's expected return)."""
+        if self.optimum is not None:
+            return self.optimum["return"]
+        return float(self.played.returns.mean())
+
+
+def reference_of(
+    scenario: Scenario,
+    name: str | None = None,
+    episodes: int = 500,
+    num_envs: int = 16,
+    seed: int = REFERENCE_SEED,
+) -> ReferenceResult | None:
+    """The reference beside a result in ``scenario``: the pursuer policy ``name``
+    (default: :func:`reference_policy`; ``none``: no reference, ``None``). The oracle's on
+    a grid is its exact optimum; any other is played for ``episodes`` episodes in up to
+    ``num_envs`` games from ``seed``. Where it cannot be had (an arena too large for the
+    oracle; a grid whose evader is learned, which has no single optimum) the result says
+    why in ``unavailable``."""
+    name = name or reference_policy(scenario)
+    if name == "none":
+        return None
+    if name == "oracle" and scenario.mode == "grid":
+        best = optimum(scenario)
+        if best is not None:
+            return ReferenceResult(name, optimum=best)
+        if scenario.evader == "learned":
+            return ReferenceResult(name, unavailable="no exact optimum against a learned evader")
+    try:
+        policy = pursuer_policy(name, scenario)
+    except ConfigError as err:  # e.g. an arena too large for the oracle
+        return ReferenceResult(name, unavailable=str(err))
+    return ReferenceResult(name, played=play(scenario, policy, episodes, num_envs, seed))
+
+
 def reference_report(
     scenario: Scenario, name: str, episodes: int, num_envs: int, seed: int
 ) -> dict[str, Any] | None:
-    """The reference beside a result: the exact optimum on grids the oracle solves, else
-    the named pursuer policy played on the same episodes (``None`` for ``none``)."""
-    if name == "none":
+    """:func:`reference_of` as ``evaluate`` reports it: the exact optimum's figures, the
+    played policy's statistics with their CIs, or why it is unavailable (``None`` for
+    ``none``)."""
+    ref = reference_of(scenario, name, episodes, num_envs, seed)
+    if ref is None:
         return None
-    best = optimum(scenario) if name == "oracle" else None
-    if best is not None:
-        return {"policy": "optimum (exact oracle)", "exact": True, **best}
-    try:
-        policy = pursuer_policy(name, scenario)
-    except ConfigError as err:  # e.g. an arena too large for the oracle: no reference
-        return {"policy": name, "unavailable": str(err)}
-    result = play(scenario, policy, episodes, num_envs, seed)
-    return {"policy": f"{name} (played)", "exact": False, **result.report(seed)}
+    if ref.unavailable is not None:
+        return {"policy": ref.policy, "unavailable": ref.unavailable}
+    if ref.exact:
+        return {"policy": ref.label, "exact": True, **ref.optimum}
+    return {"policy": ref.label, "exact": False, **ref.played.report(seed)}

@@ -39,9 +39,13 @@ from ..envs.core import ACTION_DELTAS
 from ..solve.cache import OracleSolution, load_or_solve
 from ..training.rollout import Policy
 from .baselines import pursuit_actions
-
-PURSUER_POLICIES = ("random", "pursuit", "oracle", "minimax")
-"""The names :func:`pursuer_policy` knows."""
+from .names import (
+    BEST_RESPONSE,
+    EQUILIBRIUM,
+    EVADER_POLICIES,
+    PURSUER_POLICIES,
+    SOLVED_EVADERS,
+)
 
 
 def positions_from_obs(scenario: Scenario, obs: np.ndarray) -> np.ndarray:
@@ -167,20 +171,6 @@ def pursuer_policy(name: str, scenario: Scenario) -> Policy:
     if name not in makers:
         raise ConfigError(f"unknown pursuer policy {name!r} (known: {', '.join(makers)})")
     return makers[name](scenario)
-
-
-EVADER_POLICIES = ("random", "flee", "static")
-"""Scripted evaders, played by the scenario's core."""
-
-BEST_RESPONSE = "best-response"
-"""The evader that is the exact best response to the pursuers (grids the oracle solves)."""
-
-EQUILIBRIUM = "equilibrium"
-"""The game's equilibrium evader (:mod:`a2cm_phys.solve.nash`): mixed, so always sampled;
-no team catches it sooner on average than the game's value (grids, minutes to solve)."""
-
-SOLVED_EVADERS = (BEST_RESPONSE, EQUILIBRIUM)
-"""Evaders the exact solvers give (grids only)."""
 
 
 @dataclass(frozen=True)

@@ -28,12 +28,7 @@ from ..solve.tables import (
     uniform_table,
 )
 from ..training.runs import load_trained, load_trained_evader
-
-PURSUER_NAMES = ("random", "oracle", "minimax")
-"""Named pursuer policies (anything else is a run directory)."""
-
-EVADER_NAMES = (*SCRIPTED_EVADERS, "equilibrium")
-"""Named evader policies (anything else is a run directory)."""
+from .names import PURSUER_TABLES
 
 
 class SourceError(ValueError):
@@ -49,11 +44,6 @@ class Source:
     table: np.ndarray
     label: str
     solution: Any = None
-
-
-def is_run(spec: str, names: tuple[str, ...]) -> bool:
-    """Whether ``spec`` names a run directory rather than one of ``names``."""
-    return spec not in names
 
 
 def load_pursuer_run(path: str | Path) -> tuple[Scenario, Any]:
@@ -109,7 +99,6 @@ def pursuer_source(
         label = "the minimax team (deterministic, optimal when the evader sees its move)"
         return Source(joint_policy_table(scenario, bounds.policy), label, bounds)
     if spec == "oracle":
-
         if scenario.evader not in SCRIPTED_EVADERS:
             raise SourceError(
                 f"--pursuers oracle is optimal against a scripted evader; the scenario's is "
@@ -136,11 +125,9 @@ def evader_source(
     (:attr:`Source.solution`): that is the pursuers' best response.
     """
     if spec in SCRIPTED_EVADERS:
-
         sol = load_or_solve(dataclasses.replace(scenario, evader=spec), cache_dir, use_cache)
         return Source(scripted_evader_table(scenario, spec), f"the {spec} evader", sol)
     if spec == "equilibrium":
-
         value = load_or_solve_value(scenario, cache_dir, use_cache)
         return Source(value.evader, "the game's equilibrium evader")
     trained, model = load_evader_run(spec)
@@ -157,16 +144,14 @@ def _model_table(scenario: Scenario, model: Any, agents: int, spec: str) -> np.n
 
 def run_scenario(spec: str, names: tuple[str, ...]) -> Scenario | None:
     """The scenario a run directory was trained on (``None`` for a named policy)."""
-    if not is_run(spec, names):
+    if spec in names:
         return None
-    if names == PURSUER_NAMES:
+    if names == PURSUER_TABLES:
         return load_pursuer_run(spec)[0]
     return load_evader_run(spec)[0]
 
 
 __all__ = [
-    "EVADER_NAMES",
-    "PURSUER_NAMES",
     "Source",
     "SourceError",
     "evader_source",

@@ -2,12 +2,13 @@
 
 The pursuers and the evader are chosen apart, each a run directory or a named policy
 (``--pursuers random|pursuit|oracle|minimax|RUN``, ``--evader
-random|flee|static|best-response|equilibrium|RUN``; see :mod:`a2cm_phys.analysis.policies`). The
+random|flee|static|best-response|equilibrium|RUN``; see :mod:`a2cm_phys.analysis.names`). The
 report gives the mean, median and 95th percentile of the capture steps, the capture rate,
 the collisions per episode and the return under the scenario's raw reward, each with a
-seeded bootstrap 95% confidence interval, and beside them a reference: on grids the oracle
-solves, the exact optimum and the gap to it; in physics mode a reference policy played on
-the same episodes (``--reference``).
+seeded bootstrap 95% confidence interval, and beside them the scenario's reference
+(:func:`~a2cm_phys.analysis.evaluation.reference_of`, as ``plot`` and the report draw it):
+on grids the oracle solves, the exact optimum and the gap to it; in physics a reference
+policy played on the same episodes (``--reference``).
 ``--cross-play`` plays every pairing of comma-separated lists of pursuers and evaders.
 
 Episodes are played in several games at once without favouring short ones: each game plays
@@ -24,15 +25,11 @@ from typing import Any
 
 from ..analysis.evaluation import (
     play,
+    reference_policy,
     reference_report,
 )
-from ..analysis.policies import (
-    EVADER_POLICIES,
-    PURSUER_POLICIES,
-    SOLVED_EVADERS,
-    Matchup,
-    matchup,
-)
+from ..analysis.names import EVADER_POLICIES, PURSUER_POLICIES, is_named
+from ..analysis.policies import Matchup, matchup
 from ..config import ConfigError, Scenario
 from ..training.runs import load_trained_run
 from .options import SEED, Parser, add_scenario_options, int_range, run_cli, scenario_from_args
@@ -127,8 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--reference",
         choices=["oracle", "pursuit", "random", "none"],
-        help="what to show beside the result (default: the exact optimum on grids the"
-        " oracle solves; in physics mode the pursuit policy, played)",
+        help="what to show beside the result (default: the oracle: on grids its exact"
+        " optimum, in physics with discrete moves played in the arena; under continuous"
+        " control the pursuit policy, played)",
     )
     p.add_argument("--cross-play", action="store_true", help="every pursuers × evader pairing")
     p.add_argument("--episodes", type=int_range(1, 100_000_000), default=1000)
@@ -159,7 +157,7 @@ def _scenario(args: argparse.Namespace, specs: Sequence[str | None]) -> Scenario
     if args.scenario:
         return scenario_from_args(args, train=False)
     for spec in specs:  # the first run among the policies names the game
-        if spec and spec not in (*PURSUER_POLICIES, *EVADER_POLICIES, *SOLVED_EVADERS):
+        if spec and not (is_named(spec, "pursuers") or is_named(spec, "evader")):
             return load_trained_run(spec).scenario
     raise ConfigError("named policies need --scenario (or a run directory)")
 
@@ -179,7 +177,7 @@ def _main(argv: Sequence[str]) -> int:
         "policy": game.label,
         **result.report(args.seed),
     }
-    reference = args.reference or ("oracle" if scenario.mode == "grid" else "pursuit")
+    reference = args.reference or reference_policy(scenario)
     if game.evader is None and pursuers != reference:
         report["reference"] = reference_report(
             game.scenario, reference, args.episodes, args.num_envs, args.seed

@@ -27,16 +27,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..analysis.names import EVADER_TABLES, PURSUER_TABLES
 from ..analysis.sources import (
-    EVADER_NAMES,
-    PURSUER_NAMES,
     SourceError,
     evader_source,
-    is_run,
     pursuer_source,
     run_scenario,
 )
-from ..config import Scenario, build, merge_overrides, to_dict
+from ..config import SCRIPTED_EVADERS, Scenario, build, merge_overrides, to_dict
 from ..solve import TooLargeError, UnsupportedError
 from ..solve.best_response import (
     TOLERANCE,
@@ -49,7 +47,7 @@ from ..solve.best_response import (
 from ..solve.cache import OracleSolution, load_or_solve, load_or_solve_value
 from ..solve.minimax import MinimaxBounds, minimax_bounds
 from ..solve.pursuer_step import check_size
-from ..solve.tables import SCRIPTED_EVADERS, uniform_table
+from ..solve.tables import uniform_table
 from .options import (
     Parser,
     UsageError,
@@ -219,9 +217,9 @@ def _game_value(args) -> int:
 
 def _best_response_scenario(args) -> Scenario:
     """``--scenario`` with ``--set``; without ``--scenario``, a run directory's own."""
-    names = PURSUER_NAMES if args.best_response == "evader" else EVADER_NAMES
+    names = PURSUER_TABLES if args.best_response == "evader" else EVADER_TABLES
     spec = args.pursuers if args.best_response == "evader" else args.evader
-    if args.scenario is None and spec is not None and is_run(spec, names):
+    if args.scenario is None and spec is not None and spec not in names:
         trained = run_scenario(spec, names)
         overrides, train_set = split_assignments(args.set)
         if train_set:

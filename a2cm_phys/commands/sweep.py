@@ -21,10 +21,10 @@ from ..config import (
     ConfigError,
     load_scenario,
 )
+from ..study.stopping import stop_signals
 from ..study.sweep import (
     Outcome,
     RunSpec,
-    _stop_signals,
     check_reusable,
     format_table,
     run_all,
@@ -136,7 +136,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _main(argv: Sequence[str]) -> int:
     args = build_parser().parse_args(argv)
-    with _stop_signals() as received:
+    with stop_signals() as received:
         try:
             return _sweep(args)
         except KeyboardInterrupt as stop:

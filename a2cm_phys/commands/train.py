@@ -36,7 +36,7 @@ from ..training.rundir import (
 )
 from ..training.rundir import PREVIOUS_CHECKPOINT_NAME as PREVIOUS_NAME
 from ..training.seeding import policy_rng
-from ..training.trainer import Trainer, check_run
+from ..training.trainer import Trainer
 from .options import (
     SEED,
     Parser,
@@ -196,8 +196,7 @@ def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Traine
         raise UsageError("--scenario is required (or --resume RUN_DIR)")
     scenario = scenario_from_args(args)
     cfg = train_from_args(args, {k: getattr(args, k) for k in _TRAIN_FLAGS})
-    cfg = resolve_train(scenario, cfg)  # what config.json records and the learner sees
-    check_run(scenario, cfg)  # before the run directory exists
+    cfg = resolve_train(scenario, cfg)  # checked, before the run directory exists
     if args.run_dir:
         run_dir = Path(args.run_dir)
         if run_dir.exists() and not run_dir.is_dir():

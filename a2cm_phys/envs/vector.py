@@ -23,23 +23,7 @@ from ..config import Scenario
 from .core import StepOutcome, action_shape, check_joint_actions, evader_reward
 from .evaders.learned import evader_action_shape
 from .factory import make_core
-
-
-@dataclass(frozen=True)
-class EpisodeSummary:
-    """One finished episode of a vector env (``ret``: the pursuers' team return;
-    ``evader_ret``: a learned evader's return, ``None`` with a scripted evader)."""
-
-    env: int
-    seed: int
-    length: int
-    ret: float
-    captured: bool
-    truncated: bool
-    collision_terminated: bool
-    collisions: int
-    wall_contacts: int
-    evader_ret: float | None = None
+from .tallies import EpisodeSummary, EpisodeTallies
 
 
 @dataclass
@@ -84,10 +68,7 @@ class VectorEnv:
         self.obs_dim = scenario.obs_dim
         self.core = make_core(scenario, num_envs, workers)
         self._seeds = np.random.default_rng(0)
-        self._return = np.zeros(num_envs)
-        self._evader_return = np.zeros(num_envs)
-        self._collisions = np.zeros(num_envs, dtype=np.int64)
-        self._walls = np.zeros(num_envs, dtype=np.int64)
+        self._tallies = EpisodeTallies(num_envs)
         self._closed = False
 
     def reset(self, seed: int) -> np.ndarray:
@@ -101,10 +82,7 @@ class VectorEnv:
     def _start(self, envs: np.ndarray) -> None:
         seeds = self._seeds.integers(0, 2**63, size=len(envs)).astype(np.uint64)
         self.core.reset(envs, seeds)
-        self._return[envs] = 0.0
-        self._evader_return[envs] = 0.0
-        self._collisions[envs] = 0
-        self._walls[envs] = 0
+        self._tallies.restart(envs)
 
     def state(self) -> dict[str, Any]:
         """A copy of everything that decides the games' future (for checkpoints).
@@ -117,10 +95,7 @@ class VectorEnv:
         return {
             "core": core_state() if core_state is not None else None,
             "seeds": self._seeds.bit_generator.state,
-            "return": self._return.copy(),
-            "evader_return": self._evader_return.copy(),
-            "collisions": self._collisions.copy(),
-            "walls": self._walls.copy(),
+            **self._tallies.state(),
         }
 
     def load_state(self, state: Mapping[str, Any]) -> np.ndarray:
@@ -130,10 +105,7 @@ class VectorEnv:
         self._seeds.bit_generator.state = state["seeds"]
         if state["core"] is not None and hasattr(self.core, "load_state"):
             self.core.load_state(state["core"])
-            self._return[:] = state["return"]
-            self._evader_return[:] = state.get("evader_return", 0.0)
-            self._collisions[:] = state["collisions"]
-            self._walls[:] = state["walls"]
+            self._tallies.load_state(state)
         else:
             self._start(np.arange(self.num_envs))
         return self.core.observe()
@@ -162,13 +134,8 @@ class VectorEnv:
         core = self.core
         seeds, lengths = core.episode_seed.copy(), core.t + 1
         out = core.step(actions, evader_actions)
-        self._return += out.reward
-        evader_rewards = None
-        if self.learned_evader:
-            evader_rewards = evader_reward(self.scenario, out)
-            self._evader_return += evader_rewards
-        self._collisions += out.collisions
-        self._walls += out.wall_contacts
+        evader_rewards = evader_reward(self.scenario, out) if self.learned_evader else None
+        self._tallies.add(out, evader_rewards)
         obs = core.observe()
         positions, velocities = core.positions(), core.velocities()
         done = out.terminated | out.truncated
@@ -176,21 +143,7 @@ class VectorEnv:
         final_obs = obs
         if done.any():
             envs = np.flatnonzero(done)
-            episodes = [
-                EpisodeSummary(
-                    env=int(i),
-                    seed=int(seeds[i]),
-                    length=int(lengths[i]),
-                    ret=float(self._return[i]),
-                    captured=bool(out.captured[i]),
-                    truncated=bool(out.truncated[i]),
-                    collision_terminated=bool(out.terminated[i] and not out.captured[i]),
-                    collisions=int(self._collisions[i]),
-                    wall_contacts=int(self._walls[i]),
-                    evader_ret=float(self._evader_return[i]) if self.learned_evader else None,
-                )
-                for i in envs
-            ]
+            episodes = self._tallies.summaries(envs, seeds, lengths, out, self.learned_evader)
             final_obs = obs.copy()
             self._start(envs)
             obs[envs] = core.observe()[envs]

@@ -3,14 +3,17 @@
 ``workers`` processes step the games, each a contiguous slice: the caller's process steps
 the first slice itself, and each other slice has a worker process that holds one
 :class:`~.physics.PhysicsCore` and talks to the parent over a :func:`multiprocessing.Pipe`.
-The numbers travel through shared memory (:class:`SharedBatch`): the parent writes every
-game's actions, each process writes its games' step outcomes, positions and velocities,
-and the pipe carries only the requests and the few contact events. A step is one round
-trip: the parent asks every worker, steps its own slice, then collects the replies, so all
-slices step in parallel. On two cores, ``workers=2`` is two busy processes and one
-hand-off a step. A worker polls for its next request, and the parent for the replies, for
-:data:`SPIN_SECONDS` before blocking, so that in a loop of steps neither waits on the
-kernel to wake it (:func:`_spin`).
+The numbers travel through shared memory (:class:`~.shared.SharedBatch`): the parent writes
+every game's actions, each process writes its games' step outcomes, positions and
+velocities, and the pipe carries only the requests and the few contact events. A step is
+one round trip: the parent asks every worker, steps its own slice, then collects the
+replies, so all slices step in parallel. On two cores, ``workers=2`` is two busy processes
+and one hand-off a step. A worker polls for its next request, and the parent for the
+replies, for :data:`~.worker_process.SPIN_SECONDS` before blocking, so that in a loop of
+steps neither waits on the kernel to wake it (:func:`~.worker_process.spin`).
+
+The worker processes' own loop is :mod:`.worker_process`, the parent's side of their pipes
+:mod:`.worker_pool`, the shared arrays :mod:`.shared`.
 
 Resets cost no round trip of their own. The state of a freshly built world is known in
 advance (bodies at rest at their start or placed positions), so ``reset`` writes it at
@@ -25,21 +28,8 @@ per episode seed, so a ``ProcessCore`` gives exactly the trajectories of a singl
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
-import gc
 import multiprocessing as mp
-import os
-import signal
-import sys
-import threading
-import time
-import traceback
-from collections.abc import Mapping, Sequence
-from dataclasses import fields
-from multiprocessing.connection import Connection
-from multiprocessing.reduction import ForkingPickler
-from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -47,209 +37,8 @@ from ..config import Scenario
 from .core import StepOutcome
 from .evaders.learned import refuse_evader_actions, take_evader_actions
 from .physics import PhysicsCore, StateViews, placed_positions, start_positions
-
-_GC_THRESHOLD = 10_000
-"""Allocations between a worker's young-generation collections (Python's default: 700)."""
-
-_OUTCOME = tuple(f.name for f in fields(StepOutcome) if f.name != "events")
-"""The fields of :class:`~.core.StepOutcome` that travel through shared memory (all but
-the contact events)."""
-
-Placement = Mapping[str, Sequence[float]] | None
-
-_STEP = ForkingPickler.dumps(("step", {}))
-"""A step request without placements, as :meth:`Connection.send` would pickle it."""
-
-
-class WorkerError(RuntimeError):
-    """A physics worker process died or failed; the message says which and why."""
-
-
-class SharedBatch:
-    """The arrays of a batch of ``num_envs`` physics games that the parent and its workers
-    share, in one block of shared memory. The parent writes the pursuers' actions (and a
-    learned evader's, ``evader_actions``) and marks games to reset (``reset``, with their
-    ``seed``); the workers clear those marks and write each field of the step outcome but
-    the events, and the state (positions, velocities). ``views(lo, hi)`` gives numpy views
-    of games ``lo:hi``."""
-
-    def __init__(self, scenario: Scenario, num_envs: int, ctx: Any) -> None:
-        n = scenario.pursuers
-        # continuous control: float64 (vx, vy) commands for the pursuers and the evader
-        command = (np.dtype(np.float64), (2,)) if scenario.continuous else (np.dtype(np.int64), ())
-        self.layout: list[tuple[str, np.dtype, tuple[int, ...]]] = [
-            ("actions", command[0], (n, *command[1])),
-            ("evader_actions", *command),  # read only with a learned evader
-            ("seed", np.dtype(np.uint64), ()),
-            ("state", np.dtype(np.float64), (2, n + 1, 2)),
-            ("reward", np.dtype(np.float64), ()),
-            ("collisions", np.dtype(np.int64), ()),
-            ("wall_contacts", np.dtype(np.int64), ()),
-            ("evader_action", *command),
-            ("terminated", np.dtype(np.bool_), ()),
-            ("truncated", np.dtype(np.bool_), ()),
-            ("captured", np.dtype(np.bool_), ()),
-            ("reset", np.dtype(np.bool_), ()),
-        ]
-        self.num_envs = num_envs
-        size = sum(_bytes(dtype, num_envs, tail) for _, dtype, tail in self.layout)
-        self.block = ctx.RawArray("b", size)
-
-    def views(self, lo: int = 0, hi: int | None = None) -> dict[str, np.ndarray]:
-        """Numpy views of every field for games ``lo:hi`` (default: all)."""
-        out, offset = {}, 0
-        for name, dtype, tail in self.layout:
-            count = self.num_envs * int(np.prod(tail, dtype=np.int64))
-            whole = np.frombuffer(self.block, dtype, count, offset).reshape(-1, *tail)
-            out[name] = whole[lo:hi]
-            offset += _bytes(dtype, self.num_envs, tail)
-        return out
-
-
-def _bytes(dtype: np.dtype, num_envs: int, tail: tuple[int, ...]) -> int:
-    """Bytes of one field, rounded up to 8 so that every field stays aligned."""
-    size = dtype.itemsize * num_envs * int(np.prod(tail, dtype=np.int64))
-    return -(-size // 8) * 8
-
-
-_PR_SET_PDEATHSIG = 1
-"""Linux ``prctl`` option: the signal a process gets when its parent dies."""
-
-SPIN_SECONDS = 5e-4
-"""How long a worker polls for its next request after replying, and the parent for the
-workers' replies after stepping its own slice, before either blocks (see :func:`_spin`)."""
-
-PARENT_POLL_SECONDS = 1.0
-"""How often a worker checks that its parent is alive, where the kernel cannot tell it."""
-
-
-def _die_with_parent(parent: int) -> None:
-    """End this worker when process ``parent`` ends, however it ends (SIGKILL included).
-
-    Waiting for the pipe's EOF is not enough: with ``fork``, every worker inherits the
-    parent's ends of the pipes, so no pipe closes when the parent dies. On Linux the kernel
-    sends SIGKILL when the parent dies (``PR_SET_PDEATHSIG``); everywhere, a daemon thread
-    also polls whether the parent still exists (it is not our direct parent under
-    ``forkserver``).
-    """
-    if sys.platform.startswith("linux") and os.getppid() == parent:
-        with contextlib.suppress(OSError, AttributeError):
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    first_ppid = os.getppid()
-
-    def orphaned() -> bool:
-        if first_ppid == parent and os.getppid() != parent:  # re-parented: the parent died
-            return True
-        try:
-            os.kill(parent, 0)
-        except ProcessLookupError:
-            return True
-        except PermissionError:  # a process of someone else now has that pid
-            return True
-        return False
-
-    if orphaned():  # it died before the kernel was told to watch it
-        os._exit(1)
-
-    def watch() -> None:
-        while not orphaned():
-            time.sleep(PARENT_POLL_SECONDS)
-        os._exit(1)
-
-    threading.Thread(target=watch, name="a2cm-parent-watch", daemon=True).start()
-
-
-def _serve(
-    conn: Connection,
-    scenario: Scenario,
-    shared: SharedBatch,
-    games: tuple[int, int],
-    spares: int,
-    parent: int | None = None,
-) -> None:
-    """A worker's loop: build a core for games ``lo:hi``, then on each request apply the
-    resets marked in ``shared`` and step, rebuilding up to ``spares`` worlds for later
-    resets while it waits. It ends with process ``parent`` (see :func:`_die_with_parent`)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the handler a fork may inherit
-    if parent is not None:
-        _die_with_parent(parent)
-    try:
-        lo, hi = games
-        core = PhysicsCore(scenario, hi - lo)
-        mine = shared.views(lo, hi)
-        learned = scenario.evader == "learned"
-        # Every rebuild leaves a pymunk space, joints and handlers as cyclic garbage, and
-        # allocation-triggered GC runs rescan everything alive. This process only steps
-        # worlds: collect rarely, and never rescan what exists now.
-        gc.collect()
-        gc.freeze()
-        gc.set_threshold(_GC_THRESHOLD, 10, 10)
-        conn.send(("ok", None))
-    except Exception as err:
-        _report(conn, err)
-        return
-    while True:
-        # Idle: prepare worlds for resets, up to ``spares`` waiting (not one more per step).
-        while core.spare_worlds < spares and not conn.poll(0):
-            core.build_spare()
-        try:
-            command, placed = conn.recv()
-        except EOFError:  # the parent went away
-            return
-        if command == "close":
-            conn.close()
-            return
-        try:
-            conn.send(("ok", _step_slice(core, mine, placed, learned)))
-        except Exception as err:  # report to the parent, which re-raises
-            _report(conn, err)
-        _spin([conn], SPIN_SECONDS)
-
-
-def _spin(conns: Sequence[Connection], seconds: float) -> None:
-    """Poll ``conns`` until each has something to read, for at most ``seconds``.
-
-    Between two steps of a loop a process should not sleep in the kernel: waking it costs
-    about 50-100 us on a virtual machine, and a CPU that went idle comes back with its
-    caches cold (measured here: the parent's own slice took 1.8x as long after it had
-    blocked for a reply as after it had polled for one)."""
-    deadline = time.perf_counter() + seconds
-    for conn in conns:
-        while not conn.poll(0) and time.perf_counter() < deadline:
-            pass
-
-
-def _step_slice(
-    core: PhysicsCore,
-    mine: dict[str, np.ndarray],
-    placed: dict[int, Placement] | None,
-    learned: bool,
-) -> list[list]:
-    """Step the games of ``core``, whose shared arrays are ``mine``: first the resets marked
-    there (with their ``placed`` positions, by local index), then one step; write the
-    outcome and the state to ``mine`` and return the contact events."""
-    marked = mine["reset"]
-    envs = np.flatnonzero(marked)
-    if len(envs):
-        where = [placed.get(env) for env in envs.tolist()] if placed else None
-        core.reset(envs, mine["seed"][envs], where)
-        marked[envs] = False
-    outcome = core.step(mine["actions"], mine["evader_actions"] if learned else None)
-    for name in _OUTCOME:
-        mine[name][:] = getattr(outcome, name)
-    mine["state"][:] = core._state
-    return outcome.events
-
-
-def _report(conn: Connection, err: Exception) -> None:
-    """Send ``err`` and its traceback to the parent (as a ``RuntimeError`` if it won't pickle)."""
-    text = traceback.format_exc()
-    try:
-        conn.send(("error", (err, text)))
-    except Exception:
-        conn.send(("error", (RuntimeError(f"{type(err).__name__}: {err}"), text)))
+from .shared import OUTCOME_FIELDS, Placement, SharedBatch, step_slice
+from .worker_pool import WorkerError, WorkerPool
 
 
 class ProcessCore(StateViews):
@@ -296,30 +85,11 @@ class ProcessCore(StateViews):
         slices = np.array_split(np.arange(num_envs), workers)
         self._bounds = np.cumsum([0] + [len(s) for s in slices])
         self._placed: list[dict[int, Placement]] = [{} for _ in range(workers)]
-        self._conns: list[Connection] = []
-        self._procs: list[Any] = []
-        self._closed = False
         self._learned = scenario.evader == "learned"
         ahead = [len(games) // 4 + 1 if spares is None else spares for games in slices]
-        for i, games in enumerate(slices[1:], start=1):
-            parent, child = ctx.Pipe()
-            proc = ctx.Process(
-                target=_serve,
-                args=(
-                    child,
-                    scenario,
-                    self._shared,
-                    (int(games[0]), int(games[-1]) + 1),
-                    ahead[i],
-                    os.getpid(),
-                ),
-                name=f"a2cm-physics-{i}",
-                daemon=True,
-            )
-            proc.start()
-            child.close()  # so that the parent sees EOF when the worker dies
-            self._conns.append(parent)
-            self._procs.append(proc)
+        games = [(int(s[0]), int(s[-1]) + 1) for s in slices[1:]]
+        self._pool = WorkerPool(ctx, scenario, self._shared, games, ahead[1:])
+        self._procs = self._pool.procs  # worker w at w - 1 (tests and benchmarks read it)
         # The first slice is stepped here, in the caller's process, while the others step
         # theirs: on two cores, two busy processes and one hand-off a step, not three and
         # two. (Built after the workers start, which need not inherit its worlds.)
@@ -330,7 +100,7 @@ class ProcessCore(StateViews):
             raise
         self._own_spares = ahead[0]
         self._mine = self._shared.views(0, len(slices[0]))
-        self._gather()  # each worker says it is ready
+        self._pool.gather(self.timeout)  # each worker says it is ready
 
     # ------------------------------------------------------------------ Core
 
@@ -341,7 +111,7 @@ class ProcessCore(StateViews):
         positions: Sequence[Placement] | None = None,
     ) -> None:
         """Start new episodes in games ``envs`` (global indices); see the module docstring."""
-        if self._closed:
+        if self._pool.closed:
             raise WorkerError("ProcessCore is closed")
         envs = np.atleast_1d(np.asarray(envs, dtype=np.int64))
         seeds = np.broadcast_to(np.asarray(seeds, dtype=np.uint64), envs.shape)
@@ -368,7 +138,7 @@ class ProcessCore(StateViews):
     def step(self, actions: np.ndarray, evader_actions: np.ndarray | None = None) -> StepOutcome:
         """Advance every game one step; every process steps its slice in parallel.
         ``evader_actions`` are a learned evader's (required then, refused otherwise)."""
-        if self._closed:
+        if self._pool.closed:
             raise WorkerError("ProcessCore is closed")
         actions = np.asarray(actions)
         if actions.shape[0] != self.num_envs:
@@ -379,94 +149,32 @@ class ProcessCore(StateViews):
         elif evader_actions is not None:
             raise refuse_evader_actions(self.scenario)
         self._views["actions"][:] = actions  # before asking any worker
-        for w, conn in enumerate(self._conns, start=1):
-            try:
-                if self._placed[w]:
-                    conn.send(("step", self._placed[w]))
-                else:  # the common request, pickled once
-                    conn.send_bytes(_STEP)
-            except (BrokenPipeError, ConnectionResetError, OSError):
-                raise self._death(w) from None
+        pool = self._pool
+        for w in range(1, len(self._placed)):
+            pool.ask(w, self._placed[w])
             self._placed[w] = {}
         try:
-            events = _step_slice(self._own, self._mine, self._placed[0], self._learned)
-        except BaseException:
-            self._gather(ready=False)  # no reply may stay in a pipe for the next step
+            events = step_slice(self._own, self._mine, self._placed[0], self._learned)
+        except BaseException:  # no reply may stay in a pipe for the next step
+            pool.gather(self.timeout, ready=False)
             raise
         self._placed[0] = {}
         # Prepare worlds for this slice's resets while the workers finish theirs.
-        while self._own.spare_worlds < self._own_spares and not all(c.poll(0) for c in self._conns):
+        while self._own.spare_worlds < self._own_spares and not pool.answered():
             self._own.build_spare()
-        events += [game for reply in self._gather() for game in reply]
+        events += [game for reply in pool.gather(self.timeout) for game in reply]
         self.t += 1
         views = self._views
         return StepOutcome(
-            **{name: views[name].copy() for name in _OUTCOME},
+            **{name: views[name].copy() for name in OUTCOME_FIELDS},
             events=events,
-        )
-
-    # ------------------------------------------------------------------ protocol
-
-    def _gather(self, ready: bool = True) -> list[Any]:
-        """Every worker's reply, in order; a worker's error is raised once all have replied,
-        so that no reply is left in a pipe to be mistaken for the next one (``ready=False``:
-        collect the replies and raise nothing of theirs, when the caller raises its own)."""
-        replies, error = [], None
-        _spin(self._conns, SPIN_SECONDS)
-        for w, conn in enumerate(self._conns, start=1):
-            try:  # a worker that dies closes its end of the pipe: recv raises EOFError
-                if self.timeout is not None and not conn.poll(self.timeout):
-                    raise self._silence(w)
-                status, reply = conn.recv()
-            except (EOFError, ConnectionResetError, OSError):
-                raise self._death(w) from None
-            if status == "error":
-                err, text = reply
-                err.__cause__ = WorkerError(f"physics worker {w} failed:\n{text}")
-                error = error or err
-            replies.append(reply)
-        if error is not None and ready:
-            raise error
-        return replies
-
-    def _death(self, worker: int) -> WorkerError:
-        proc = self._procs[worker - 1]
-        proc.join(timeout=1.0)
-        self.close()
-        return WorkerError(
-            f"physics worker {worker} ({proc.name}, pid {proc.pid}) died with exit code "
-            f"{proc.exitcode}; the ProcessCore is closed, make a new one"
-        )
-
-    def _silence(self, worker: int) -> WorkerError:
-        proc = self._procs[worker - 1]
-        self.close()
-        return WorkerError(
-            f"physics worker {worker} ({proc.name}, pid {proc.pid}) did not answer within "
-            f"{self.timeout:g} s (the ProcessCore's timeout); it was stopped and the "
-            "ProcessCore is closed, make a new one"
         )
 
     # ------------------------------------------------------------------ lifetime
 
     def close(self) -> None:
         """Stop the workers (idempotent)."""
-        if self._closed:
-            return
-        self._closed = True
-        for conn in self._conns:
-            with contextlib.suppress(BrokenPipeError, ConnectionResetError, OSError):
-                conn.send(("close", None))
-        for proc in self._procs:
-            proc.join(timeout=2.0)
-            if proc.is_alive():
-                proc.terminate()
-                proc.join(timeout=1.0)
-            if proc.is_alive():  # a stopped process keeps SIGTERM pending
-                proc.kill()
-                proc.join(timeout=1.0)
-        for conn in self._conns:
-            conn.close()
+        self._pool.close()
 
     def __enter__(self) -> ProcessCore:
         return self
@@ -475,5 +183,6 @@ class ProcessCore(StateViews):
         self.close()
 
     def __del__(self) -> None:
-        if not getattr(self, "_closed", True):
+        pool = getattr(self, "_pool", None)
+        if pool is not None and not pool.closed:
             self.close()

@@ -19,7 +19,7 @@ by a crash (``log.clean`` is then ``False``). Topics and schemas: :mod:`.schemas
 from __future__ import annotations
 
 from .parts import read_run
-from .reader import LogError, RunLog, Trajectory
+from .runlog import LogError, RunLog, Trajectory
 from .schemas import SUMMARY_TOPIC, TRAJECTORY_TOPIC, UPDATE_TOPIC, scene_topic
 from .writer import EpisodeRecorder
 

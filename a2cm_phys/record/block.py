@@ -9,7 +9,7 @@ import numpy as np
 
 from .buffers import StepBuffers
 from .jsontext import json_array, json_float_rows, json_number, json_object, json_rows, json_value
-from .reader import Trajectory
+from .runlog import Trajectory
 
 
 def ranges(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:

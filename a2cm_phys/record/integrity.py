@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from .reader import RunLog
+from .runlog import RunLog
 
 
 @dataclass(frozen=True)

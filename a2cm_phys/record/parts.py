@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .reader import LogError, RunLog, read_file
+from .reader import read_file
+from .runlog import LogError, RunLog
 
 FIRST_PART = "episodes.mcap"
 """File name of a run's first log part."""

@@ -18,7 +18,7 @@ import numpy as np
 from ..config import Scenario
 from ..envs.core import agent_names
 from ..envs.render import EVADER_COLOUR, PURSUER_COLOURS
-from .reader import Trajectory
+from .runlog import Trajectory
 
 FRAME_ID = "arena"
 """The frame every entity is drawn in (set it as the 3D panel's display frame)."""

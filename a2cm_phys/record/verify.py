@@ -19,7 +19,7 @@ import numpy as np
 from ..config import Scenario
 from ..envs.core import evader_reward
 from ..envs.factory import make_core
-from .reader import RunLog, Trajectory
+from .runlog import RunLog, Trajectory
 
 
 def verify_trajectory(
@@ -28,10 +28,21 @@ def verify_trajectory(
     """Re-simulate ``traj`` from its seed and logged actions; ``None`` if it matches the
     log exactly, else a description of the first divergence."""
     core = core if core is not None else make_core(scenario, 1)
-    n, length = scenario.pursuers, traj.length
     if traj.continuous != scenario.continuous:
         kind = "commands" if traj.continuous else "moves"
         return f"the log holds {kind}, but scenario {scenario.name} has {scenario.control} control"
+    sim, sim_events = _resimulate(scenario, traj, core)
+    logged = _logged(traj, scenario.pursuers)
+    return _first_divergence(sim, logged) or _event_divergence(traj, sim_events)
+
+
+def _resimulate(
+    scenario: Scenario, traj: Trajectory, core: object
+) -> tuple[dict[str, np.ndarray], list[tuple]]:
+    """Replay ``traj``'s actions from its seed in ``core`` (one game): the simulated values
+    by name (those :func:`_logged` names; a step's values stay zero after an early end) and
+    the contact events."""
+    n, length = scenario.pursuers, traj.length
     learned = scenario.evader == "learned"
     core.reset(np.array([0]), np.array([traj.seed], dtype=np.uint64))
     sim = {
@@ -72,12 +83,18 @@ def verify_trajectory(
             sim_events += [tuple(e) for e in out.events[0]]
         if sim["episode end"][k] and k < length - 1:
             break
-    end = np.zeros(length, dtype=bool)
+    return sim, sim_events
+
+
+def _logged(traj: Trajectory, pursuers: int) -> dict[str, np.ndarray | None]:
+    """The logged values :func:`_resimulate` reproduces, by the same names (the episode ends
+    at its last step and nowhere before)."""
+    end = np.zeros(traj.length, dtype=bool)
     end[-1] = True
-    logged = {
+    return {
         "positions": traj.positions,
         "velocities": traj.velocities,
-        "evader action": traj.actions[:, n],
+        "evader action": traj.actions[:, pursuers],
         "reward": traj.reward,
         "evader reward": traj.evader_reward,
         "captured": traj.captured,
@@ -85,6 +102,13 @@ def verify_trajectory(
         "wall contacts": traj.wall_contacts,
         "episode end": end,
     }
+
+
+def _first_divergence(
+    sim: dict[str, np.ndarray], logged: dict[str, np.ndarray | None]
+) -> str | None:
+    """The earliest step at which a simulated value differs from the logged one, described;
+    ``None`` if none does."""
     first: tuple[int, str] | None = None
     for name, sim_values in sim.items():
         log_values = logged[name]
@@ -95,8 +119,12 @@ def verify_trajectory(
             step = k if state else k + 1
             if first is None or step < first[0]:
                 first = (step, _divergence((name, step, log_values[k], sim_values[k])))
-    if first is not None:
-        return first[1]
+    return None if first is None else first[1]
+
+
+def _event_divergence(traj: Trajectory, sim_events: list[tuple]) -> str | None:
+    """Where the re-simulated contact events first differ from the logged ones (physics
+    logs); ``None`` if they agree or the log holds none."""
     logged_events = [tuple(e) for e in traj.events or ()]
     if traj.events is not None and logged_events != sim_events:
         i = next(

@@ -3,7 +3,7 @@
 :mod:`.model` factorises one step of the game into per-pursuer tables and computes the
 Bellman backup over all joint states and joint actions with numpy; :mod:`.dp` runs value
 iteration on it (and, for evaders that might escape, finds the states from which capture
-cannot be forced); :mod:`.evaluate` replays a fixed policy through the real rule
+cannot be forced); :mod:`.policy_chain` replays a fixed policy through the real rule
 (:meth:`~a2cm_phys.envs.grid.GridRules.apply`) to evaluate it exactly. The command and the
 cached, playable policy live in :mod:`a2cm_phys.oracle`.
 
@@ -27,14 +27,14 @@ from .best_response import (
     pursuers_best_response,
 )
 from .dp import DPResult, solve_dp
-from .evaluate import (
+from .model import GridModel, TooLargeError, UnsupportedError
+from .policy_chain import (
     PolicyChain,
     capture_distribution,
     evaluate_policy,
     policy_chain,
     state_visits,
 )
-from .model import GridModel, TooLargeError, UnsupportedError
 from .tables import (
     TablePolicy,
     joint_observations,

@@ -22,7 +22,8 @@ import numpy as np
 from ..config import Scenario
 from ..envs.core import default_start
 from . import GridModel, capture_distribution, evaluate_policy, policy_chain, solve_dp
-from .evaluate import CaptureDistribution, PolicyChain
+from .policy_chain import CaptureDistribution, PolicyChain
+from .tables import state_index
 
 if TYPE_CHECKING:  # the solver imports torch: only when the game's value is asked for
     from .nash import GameValue
@@ -90,14 +91,7 @@ class OracleSolution:
 
     def index(self, positions: np.ndarray) -> np.ndarray:
         """State indices of integer positions ``(..., N + 1, 2)`` (pursuers, then evader)."""
-        xy = np.asarray(positions, dtype=np.int64)
-        size, n = self.scenario.size, self.scenario.pursuers
-        if xy.shape[-2:] != (n + 1, 2):
-            raise ValueError(f"positions must have shape (..., {n + 1}, 2), got {xy.shape}")
-        if np.any((xy < 0) | (xy >= size)):
-            raise ValueError(f"positions off the {size}x{size} arena")
-        cells = xy[..., 0] + size * xy[..., 1]
-        return np.ravel_multi_index(tuple(np.moveaxis(cells, -1, 0)), self.model.shape)
+        return state_index(self.scenario, positions)
 
     def _captured(self, positions: np.ndarray) -> np.ndarray:
         xy = np.asarray(positions)

@@ -10,9 +10,10 @@ the evader depends only on its own cell and action and the evader's cell and mov
 expected next value ``Σ_b P(b | s) · [no capture] · U(s')`` over all states and joint actions
 is a chain of ``np.take`` calls, one per agent, each multiplied by that agent's
 no-capture factor; the full ``(states × joint actions)`` tensor is only built one slice of
-``p_0`` at a time. All tables come from :class:`~a2cm_phys.envs.grid.GridRules`: its move
-table, and its :meth:`~a2cm_phys.envs.grid.GridRules.apply` run on every one-pursuer
-(capture) and two-pursuer (collision) configuration.
+``p_0`` at a time (:class:`~.backup.SlicedBackup`). All tables come from
+:class:`~a2cm_phys.envs.grid.GridRules`: its move table, and its
+:meth:`~a2cm_phys.envs.grid.GridRules.apply` run on every one-pursuer (capture) and
+two-pursuer (collision) configuration.
 """
 
 from __future__ import annotations
@@ -25,7 +26,16 @@ import numpy as np
 from ..config import Scenario
 from ..envs.evaders.scripted import STAY
 from ..envs.grid import GridRules
-from .tables import SCRIPTED_EVADERS, check_table, flee_law
+from .backup import SlicedBackup
+from .tables import (
+    SCRIPTED_EVADERS,
+    check_table,
+    flee_law,
+    joint_actions,
+    state_cells,
+    state_of_cells,
+    valid_states,
+)
 
 MAX_STATES = 20_000_000
 """Largest joint state space the solver attempts."""
@@ -143,9 +153,7 @@ class GridModel:
         self.walls = self.rules.blocked.reshape(c, 5)[:, :a].astype(np.float64)
         self.pair_collide = pair_table(scenario)
         self.weights = self._evader_weights()
-        # Built on first use: loading a cached solution only needs the tables above.
-        self._nocoll: list[np.ndarray] | None = None
-        self._reward: list[np.ndarray] | None = None
+        self.backup = SlicedBackup(self)
 
     # ------------------------------------------------------------------ sizes and states
 
@@ -176,28 +184,26 @@ class GridModel:
         chain = nb * s * self.n_actions ** (n - 1) * 8  # one pre-reduced tensor per evader move
         slices = 4 * self.chunk * (s // self.n_cells) * self.n_joint * 8
         full = s * self.n_joint
-        extra = full * (8 if self._reward_is_array() else 0) + full * self.terminate
+        extra = full * (8 if self.reward_varies else 0) + full * self.terminate
         extra += full * law  # safe-action mask
         replay = s * nb * (8 + 8 + 4 * (n + 1) * 2)
         return float(state_arrays + chain + slices + extra + replay)
 
     def decode(self, index: np.ndarray) -> np.ndarray:
         """Cells ``(N + 1, K)`` (pursuers, then the evader) of state indices ``(K,)``."""
-        return np.stack(np.unravel_index(np.asarray(index), self.shape)).astype(np.int64)
+        return state_cells(self.scenario, index)
 
     def encode(self, cells: np.ndarray) -> np.ndarray:
         """State indices of cells ``(N + 1, …)``."""
-        return np.ravel_multi_index(tuple(np.asarray(cells)), self.shape)
+        return state_of_cells(self.scenario, cells)
 
     def joint_to_actions(self, joint: np.ndarray) -> np.ndarray:
         """Per-pursuer actions ``(K, N)`` int64 of joint action indices ``(K,)``."""
-        shape = (self.n_actions,) * self.n
-        return np.stack(np.unravel_index(np.asarray(joint), shape), axis=-1).astype(np.int64)
+        return joint_actions(self.scenario, joint)
 
     def valid(self) -> np.ndarray:
         """``(S,)`` mask of states that can occur: no pursuer on the evader's cell."""
-        cells = self.decode(np.arange(self.n_states))
-        return ~np.any(cells[:-1] == cells[-1], axis=0)
+        return valid_states(self.scenario)
 
     # ------------------------------------------------------------------ tables
 
@@ -212,102 +218,16 @@ class GridModel:
 
     # ------------------------------------------------------------------ the backup
 
-    def _chunks(self) -> Iterator[tuple[int, int]]:
-        for lo in range(0, self.n_cells, self.chunk):
-            yield lo, min(self.n_cells, lo + self.chunk)
-
-    def _place(self, table: np.ndarray, axes: tuple[int, ...], lo: int, hi: int) -> np.ndarray:
-        """``table`` reshaped to broadcast over a slice ``[lo, hi)`` of the full tensor.
-
-        The full tensor's axes are ``(p_0, a_0, p_1, a_1, …, p_{N-1}, a_{N-1}, e)``; ``axes``
-        says where each axis of ``table`` goes (in increasing order).
-        """
-        shape = [1] * (2 * self.n + 1)
-        for axis, size in zip(axes, table.shape, strict=True):
-            shape[axis] = size
-        out = table.reshape(shape)
-        return out[lo:hi] if axes[0] == 0 else out
-
-    def _nocoll_chunk(self, lo: int, hi: int) -> np.ndarray:
-        """No pursuer pair collides (``terminate`` mode: the episode goes on), as bool."""
-        out = np.ones(self._slice_shape(lo, hi), dtype=bool)
-        for i in range(self.n):
-            for j in range(i + 1, self.n):
-                axes = (2 * i, 2 * i + 1, 2 * j, 2 * j + 1)
-                out &= self._place(self.pair_collide, axes, lo, hi) == 0
-        return out
-
-    def _slice_shape(self, lo: int, hi: int) -> tuple[int, ...]:
-        c, a = self.n_cells, self.n_actions
-        return (hi - lo, a) + (c, a) * (self.n - 1) + (c,)
-
-    def _reward_is_array(self) -> bool:
+    @property
+    def reward_varies(self) -> bool:
+        """Whether the immediate reward depends on the state and joint action (walls,
+        captures or collisions pay), not only the step's."""
         rw = self.scenario.rewards
         return bool(rw.wall or rw.capture or self.collision_reward)
 
-    def _reward_chunks(self) -> list[np.ndarray]:
-        """Expected immediate reward per (state, joint action) slice."""
-        rw, n = self.scenario.rewards, self.n
-        out = []
-        capture = None
-        if rw.capture:
-            ones = np.ones(self.shape)
-            capture = [g.copy() for _, _, g in self.expect(ones, collisions=False)]
-        for k, (lo, hi) in enumerate(self._chunks()):
-            r = np.full(self._slice_shape(lo, hi), rw.step)
-            for i in range(n):
-                r += rw.wall * self._place(self.walls, (2 * i, 2 * i + 1), lo, hi)
-                for j in range(i + 1, n):
-                    axes = (2 * i, 2 * i + 1, 2 * j, 2 * j + 1)
-                    r += self.collision_reward * self._place(self.pair_collide, axes, lo, hi)
-            if capture is not None:
-                r += rw.capture * (1.0 - capture[k])
-            out.append(r)
-        return out
-
     def reward(self, k: int) -> np.ndarray | float:
         """Expected immediate reward of slice number ``k`` (an array, or the step reward)."""
-        if not self._reward_is_array():
-            return self.scenario.rewards.step
-        if self._reward is None:
-            self._reward = self._reward_chunks()
-        return self._reward[k]
-
-    def _trailing(self, shape: tuple[int, ...]) -> tuple[int, ...]:
-        """``shape`` widened to the last pursuer's ``(cell, action)`` axes.
-
-        Broadcasting a factor whose innermost axis is only ``e`` makes numpy loop over runs
-        of ``C`` elements; widening it to ``(p_{N-1}, a_{N-1}, e)`` makes the runs long.
-        """
-        if self.n < 2:
-            return shape
-        return (*shape[:-3], self.n_cells, self.n_actions, shape[-1])
-
-    def _pre(self, u: np.ndarray, b: int) -> np.ndarray:
-        """Pursuers ``1 … N-1`` and the evader's move ``b`` applied to ``u``: all but ``p_0``."""
-        x = np.take(u, self.emove[:, b], axis=self.n)
-        for i in range(self.n - 1, 0, -1):
-            x = np.take(x, self.pmove, axis=i)
-            shape = (self.n_cells, self.n_actions) + (1, 1) * (self.n - 1 - i) + (self.n_cells,)
-            factor = self.free[:, :, :, b].reshape(shape)
-            x *= np.broadcast_to(factor, self._trailing(shape)).copy()
-        return x
-
-    def _factors(self, lo: int, hi: int) -> list[np.ndarray]:
-        """Per evader move, the ``p_0`` no-capture factor times ``P(b | s)`` for a slice."""
-        c, a, n = self.n_cells, self.n_actions, self.n
-        shape = (hi - lo, a) + (1, 1) * (n - 1) + (c,)
-        out = []
-        for b in range(self.n_moves):
-            factor = self.free[lo:hi, :, :, b].reshape(shape)
-            if self.weights is not None:
-                w = self.weights[:, b].reshape((c,) + (1, c) * n)[lo:hi]
-                factor = factor * w
-            elif self.n_moves > 1:
-                factor = factor / self.n_moves
-            full = np.broadcast_shapes(factor.shape, self._trailing(shape))
-            out.append(np.ascontiguousarray(np.broadcast_to(factor, full)))
-        return out
+        return self.backup.reward(k)
 
     def expect(
         self, u: np.ndarray, collisions: bool = True
@@ -319,20 +239,4 @@ class GridModel:
         capture terminates (used for the capture probability itself). ``G`` is a buffer
         reused for the next slice: copy what must outlive the iteration.
         """
-        pre = [self._pre(u, b) for b in range(self.n_moves)]
-        acc = tmp = None
-        for k, (lo, hi) in enumerate(self._chunks()):
-            shape = self._slice_shape(lo, hi)
-            if acc is None or acc.shape != shape:
-                acc, tmp = np.empty(shape), np.empty(shape)
-            for b, (x, factor) in enumerate(zip(pre, self._factors(lo, hi), strict=True)):
-                out = acc if b == 0 else tmp
-                np.take(x, self.pmove[lo:hi], axis=0, out=out, mode="clip")
-                out *= factor
-                if b:
-                    acc += tmp
-            if collisions and self.terminate:
-                if self._nocoll is None:
-                    self._nocoll = [self._nocoll_chunk(*bounds) for bounds in self._chunks()]
-                acc *= self._nocoll[k]
-            yield lo, hi, acc
+        return self.backup.expect(u, collisions)

@@ -18,11 +18,8 @@ Three implementations, picked by the table:
   batched matrix products per evader move.
 - *general* (e.g. learned actors): a pursuer's probabilities depend on every agent's
   cell, so nothing factorises: every state's ``A^N`` next states, weighed by the joint
-  probabilities, form a sparse ``S × S`` matrix (torch CSR: one fused gather–multiply–sum).
-  Which next state does not depend on the evader's move once ``x`` is shifted along the
-  evader's axis, so one matrix product serves all moves and columns at once. A pursuer
-  landing on the evader's cell lands on a state where ``x`` is zero; collisions
-  (``terminate`` mode) are left out of the matrix, and swaps are subtracted again, sparsely.
+  probabilities, form a sparse ``S × S`` matrix (torch CSR: one fused gather–multiply–sum),
+  one for all evader moves (:mod:`.sparse_step`).
 
 The product kind's tables and the collision masks come from :meth:`GridRules.apply` on
 every one- and two-pursuer configuration; the tests compare the three kinds with each
@@ -31,22 +28,22 @@ other and with plain enumeration of the rules.
 
 from __future__ import annotations
 
-import warnings
 from typing import Any, Literal
 
 import numpy as np
 
 from ..config import Scenario
 from ..envs.grid import GridRules
-from .model import (
-    MAX_STATES,
-    MEMORY_BUDGET,
-    TooLargeError,
-    UnsupportedError,
-    free_table,
-    pair_table,
+from .model import MAX_STATES, MEMORY_BUDGET, TooLargeError, UnsupportedError, free_table
+from .sparse_step import (
+    CsrPattern,
+    apart_mask,
+    joint_next_states,
+    sparse_expect,
+    swap_entries,
+    swap_rows,
 )
-from .tables import check_table, n_states, state_cells, valid_states
+from .tables import check_table, n_states, state_cells, state_of_cells, valid_states
 
 Kind = Literal["auto", "deterministic", "product", "general"]
 
@@ -107,6 +104,57 @@ def check_size(
         )
 
 
+def replay_step(
+    scenario: Scenario, table: np.ndarray, moves: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The deterministic kind: every (state, evader move) replayed through
+    ``GridRules.apply`` under the one-hot ``table``. Returns the next states ``(S, nb)``,
+    the probabilities (0 or 1) of a capture and of the episode's end."""
+    cells = state_cells(scenario)
+    actions = table.argmax(-1)  # (S, N)
+    rules = GridRules(scenario)
+    terminate = scenario.collisions.mode == "terminate"
+    s, nb = n_states(scenario), len(moves)
+    nxt = np.empty((s, nb), dtype=np.int64)
+    p_capture = np.empty((s, nb))
+    p_end = np.empty((s, nb))
+    for b, move in enumerate(moves):
+        new, captured, collisions, _ = rules.apply(cells.copy(), actions, np.full(s, move))
+        nxt[:, b] = state_of_cells(scenario, new)
+        p_capture[:, b] = captured
+        p_end[:, b] = captured | (terminate & (collisions > 0))
+    return nxt, p_capture, p_end
+
+
+def product_matrices(
+    scenario: Scenario, rho: np.ndarray, pmove: np.ndarray, moves: np.ndarray
+) -> np.ndarray:
+    """The product kind's ``M[i, b, e, p, q]``: P(pursuer ``i`` moves from ``p`` to ``q``
+    and misses the evader leaving ``e`` by move ``b``), under the rows ``rho (N, A)`` every
+    state shares."""
+    c, a, n = scenario.size**2, scenario.actions, scenario.pursuers
+    free = free_table(scenario, moves)  # (p, a, e, b)
+    matrices = np.zeros((n, len(moves), c, c, c))  # (i, b, e, p, q)
+    p = np.arange(c)
+    for i in range(n):
+        for act in range(a):  # p -> q is one-to-one for one action: no repeated pairs
+            w = rho[i, act] * free[:, act]  # (p, e, b)
+            matrices[i][:, :, p, pmove[:, act]] += w.transpose(2, 1, 0)
+    return matrices
+
+
+def product_expect(matrices: np.ndarray, emove: np.ndarray, x: np.ndarray, b: int) -> np.ndarray:
+    """The product kind's ``G[:, b]`` of ``x (S, m)`` for one evader move: the evader's
+    axis first, then one matrix product per pursuer (broadcast over the evader's cell and
+    the pursuers before it: no transposes)."""
+    c, n, m = emove.shape[0], matrices.shape[0], x.shape[1]
+    y = x.reshape(-1, c, m)[:, emove[:, b]].transpose(1, 0, 2)  # (e, q…, m)
+    y = np.ascontiguousarray(y)
+    for i in range(n):
+        y = np.matmul(matrices[i, b][:, None], y.reshape(c, c**i, c, -1))
+    return y.reshape(c, -1, m).transpose(1, 0, 2).reshape(len(x), m)
+
+
 class PursuerStep:
     """The expectation over the pursuers' table of one step, from every joint state.
 
@@ -117,7 +165,10 @@ class PursuerStep:
 
     ``p_capture[s, b]`` and ``p_end[s, b]`` are the probabilities that the step from
     ``s`` with evader move ``b`` captures the evader, and that it ends the episode
-    (capture, or a pursuer collision in ``terminate`` mode).
+    (capture, or a pursuer collision in ``terminate`` mode). The general kind keeps its
+    next states ``index`` and their ``weight`` ``(S, A^N)``, its ``swaps``
+    (:func:`~.sparse_step.swap_rows`) and, in ``terminate`` mode, ``apart``
+    (:func:`~.sparse_step.apart_mask`).
     """
 
     def __init__(
@@ -146,156 +197,42 @@ class PursuerStep:
         self.pmove = move[:, : self.a]
         self.emove = move[:, self.moves]
         if self.kind == "deterministic":
-            self._build_chain()
+            self.next, self.p_capture, self.p_end = replay_step(scenario, self.table, self.moves)
+            self.cont = 1.0 - self.p_end
             return
         if self.kind == "product":
-            self._build_matrices()
+            rho = self.table[np.argmax(self.valid)]  # (N, A): the rows every state shares
+            self.matrices = product_matrices(scenario, rho, self.pmove, self.moves)
         else:
-            self._structure: tuple[Any, ...] | None = None  # see _csr
+            self.index = joint_next_states(scenario, self.pmove)
+            self.weight = self.joint_weights(np.arange(self.n_states))
+            self.swaps = swap_rows(scenario, self.pmove, self.emove)
+            self.pattern = CsrPattern(self.index)
             self.apart: np.ndarray | None = None  # see _fold_collisions
-            self._build_sparse()
         self._weigh()
 
     def _weigh(self) -> None:
         """The general kind's matrix of ``weight``, and the capture and end probabilities
         of a step, with collisions folded into the weights in ``terminate`` mode."""
         if self.kind == "general":
-            self.matrix = self._csr(self.weight)
-            self._swap_entries()
+            self._sparse()
         ones = self.valid.astype(np.float64)[:, None]  # 1 where the episode goes on
         self.p_capture = self.p_end = 1.0 - self.expect(ones)[..., 0]
         if self.terminate:  # now also end the episode on collisions
             self._fold_collisions()
             self.p_end = 1.0 - self.expect(ones)[..., 0]
 
-    # ------------------------------------------------------------------ deterministic
-
-    def _build_chain(self) -> None:
-        """Replay every (state, evader move) through ``GridRules.apply``."""
-        cells = state_cells(self.scenario)
-        actions = self.table.argmax(-1)  # (S, N)
-        rules = GridRules(self.scenario)
-        s, nb = self.n_states, len(self.moves)
-        self.next = np.empty((s, nb), dtype=np.int64)
-        self.p_capture = np.empty((s, nb))
-        self.p_end = np.empty((s, nb))
-        for b, move in enumerate(self.moves):
-            new, captured, collisions, _ = rules.apply(cells.copy(), actions, np.full(s, move))
-            self.next[:, b] = np.ravel_multi_index(tuple(new), self.shape)
-            self.p_capture[:, b] = captured
-            self.p_end[:, b] = captured | (self.terminate & (collisions > 0))
-        self.cont = 1.0 - self.p_end
-
-    # ------------------------------------------------------------------ product
-
-    def _build_matrices(self) -> None:
-        """``M[i, b, e, p, q]``: P(pursuer ``i`` moves from ``p`` to ``q`` and misses the
-        evader leaving ``e`` by move ``b``), the same in every state."""
-        c, a, n = self.c, self.a, self.n
-        rho = self.table[np.argmax(self.valid)]  # (N, A)
-        free = free_table(self.scenario, self.moves)  # (p, a, e, b)
-        self.matrices = np.zeros((n, len(self.moves), c, c, c))  # (i, b, e, p, q)
-        p = np.arange(c)
-        for i in range(n):
-            for act in range(a):  # p -> q is one-to-one for one action: no repeated pairs
-                w = rho[i, act] * free[:, act]  # (p, e, b)
-                self.matrices[i][:, :, p, self.pmove[:, act]] += w.transpose(2, 1, 0)
-
-    def _product(self, x: np.ndarray, b: int) -> np.ndarray:
-        """One evader move: the evader's axis first, then one matrix product per pursuer
-        (broadcast over the evader's cell and the pursuers before it: no transposes)."""
-        c, n, m = self.c, self.n, x.shape[1]
-        y = x.reshape(-1, c, m)[:, self.emove[:, b]].transpose(1, 0, 2)  # (e, q…, m)
-        y = np.ascontiguousarray(y)
-        for i in range(n):
-            y = np.matmul(self.matrices[i, b][:, None], y.reshape(c, c**i, c, -1))
-        return y.reshape(c, -1, m).transpose(1, 0, 2).reshape(self.n_states, m)
-
-    # ------------------------------------------------------------------ general
-
-    def _build_sparse(self) -> None:
-        """The step as one sparse ``S × S`` matrix (shared by all evader moves) and, per
-        move, the swap entries to take out again."""
-        c, a, n, s = self.c, self.a, self.n, self.n_states
-        cells = state_cells(self.scenario)
-        joint = (s,) + (a,) * n
-        index = np.broadcast_to(cells[-1].reshape((s,) + (1,) * n), joint).copy()
-        weight = np.ones(joint)
-        for i in range(n):
-            shape = (s,) + (1,) * i + (a,) + (1,) * (n - 1 - i)
-            index += (self.pmove[cells[i]] * c ** (n - i)).reshape(shape)
-            weight *= self.table[:, i, :].reshape(shape)
-        self.index, self.weight = index.reshape(s, -1), weight.reshape(s, -1)
-        # Swaps: pursuer i moves onto the evader's cell e as the evader moves onto p_i.
-        # A capture the matrix cannot see (the next state is a valid one): those
-        # (state, joint action) entries are subtracted again, sparsely.
-        self.swaps: list[tuple[np.ndarray, np.ndarray]] = []
-        for b in range(len(self.moves)):
-            target = self.emove[cells[-1], b]
-            rows = np.flatnonzero(np.any(cells[:-1] == target, axis=0) & (target != cells[-1]))
-            hit = np.zeros((len(rows),) + (a,) * n, dtype=bool)
-            for i in range(n):
-                swap = (cells[i, rows] == target[rows])[:, None] & (
-                    self.pmove[cells[i, rows]] == cells[-1, rows, None]
-                )  # (rows, A)
-                hit |= swap.reshape((len(rows),) + (1,) * i + (a,) + (1,) * (n - 1 - i))
-            r, j = np.nonzero(hit.reshape(len(rows), a**n))
-            self.swaps.append((rows[r], rows[r] * a**n + j))
-
-    def _swap_entries(self) -> None:
-        """Per evader move: the swap entries' rows, columns and weights."""
-        index, weight = self.index.ravel(), self.weight.ravel()
-        self.swap_entries = [(rows, index[flat], weight[flat]) for rows, flat in self.swaps]
-
-    def _csr(self, weight: np.ndarray) -> Any:
-        """``weight (S, J)`` at columns ``index (S, J)`` as a torch CSR matrix, duplicate
-        columns (moves that bump into a wall) summed. The matrix's structure depends on the
-        arena alone: it is sorted out once, and a later call only sums new weights."""
-        import torch
-
-        if self._structure is None:
-            order = np.argsort(self.index, axis=1, kind="stable")
-            cols = np.take_along_axis(self.index, order, axis=1)
-            first = np.ones(cols.shape, dtype=bool)
-            first[:, 1:] = cols[:, 1:] != cols[:, :-1]
-            starts = np.flatnonzero(first)
-            crow = np.concatenate(([0], np.cumsum(first.sum(axis=1))))
-            order += np.arange(self.n_states)[:, None] * order.shape[1]
-            self._structure = (
-                order.ravel(),
-                starts,
-                torch.from_numpy(crow.astype(np.int32)),
-                torch.from_numpy(cols.ravel()[starts].astype(np.int32)),
-            )
-        flat_order, starts, crow, cols = self._structure
-        values = np.add.reduceat(weight.ravel()[flat_order], starts)
-        with warnings.catch_warnings():  # "sparse CSR support is in beta"
-            warnings.simplefilter("ignore", UserWarning)
-            return torch.sparse_csr_tensor(
-                crow,
-                cols,
-                torch.from_numpy(values),
-                size=(self.n_states, self.n_states),
-                check_invariants=False,
-            )
+    def _sparse(self) -> None:
+        """The general kind's sparse matrix and swap entries of the current ``weight``."""
+        self.matrix: Any = self.pattern.matrix(self.weight)
+        self.swap_entries = swap_entries(self.index, self.weight, self.swaps)
 
     def _fold_collisions(self) -> None:
         """``terminate`` mode: a step in which two pursuers meet ends the episode."""
-        a, n, s = self.a, self.n, self.n_states
-        if self.apart is None:  # (S, J): no two pursuers meet
-            cells = state_cells(self.scenario)
-            pair = pair_table(self.scenario) == 0
-            ok = np.ones((s,) + (a,) * n, dtype=bool)
-            for i in range(n):
-                for k in range(i + 1, n):
-                    ai = np.arange(a).reshape((1,) * i + (a,) + (1,) * (n - 1 - i))
-                    ak = np.arange(a).reshape((1,) * k + (a,) + (1,) * (n - 1 - k))
-                    pi, pk = (cells[h].reshape((s,) + (1,) * n) for h in (i, k))
-                    ok &= pair[pi, ai, pk, ak]
-            self.apart = ok.reshape(s, -1)
+        if self.apart is None:
+            self.apart = apart_mask(self.scenario)
         self.weight = self.weight * self.apart
-        self.matrix = self._csr(self.weight)
-        self._swap_entries()
+        self._sparse()
 
     def reweight(self, pursuer_probs: np.ndarray) -> None:
         """The same step under another pursuer table of the same arena (general kind): the
@@ -315,30 +252,13 @@ class PursuerStep:
             w = (w[:, :, None] * self.table[rows, i, None, :]).reshape(len(rows), -1)
         return w
 
-    def _general(self, x: np.ndarray) -> np.ndarray:
-        """All evader moves at once: ``x`` shifted along the evader's axis by each move,
-        side by side, times the matrix; minus the swaps."""
-        import torch
-
-        c, m, nb = self.c, x.shape[1], len(self.moves)
-        shifted = np.take(x.reshape(-1, c, m), self.emove, axis=1)  # (…, e, b, m)
-        shifted = shifted.reshape(self.n_states, nb * m)
-        out = (self.matrix @ torch.from_numpy(shifted)).numpy().reshape(-1, nb, m)
-        for b, (rows, cols, weight) in enumerate(self.swap_entries):
-            for col in range(m):
-                values = weight * shifted[cols, b * m + col]
-                out[:, b, col] -= np.bincount(rows, weights=values, minlength=self.n_states)
-        return out
-
-    # ------------------------------------------------------------------ the operator
-
     def expect(self, x: np.ndarray) -> np.ndarray:
         """``G (S, nb, m)`` of ``x (S, m)`` (``x`` zero where a pursuer is on the evader)."""
         if self.kind == "deterministic":
             return self.cont[..., None] * x[self.next]
         if self.kind == "general":
-            return self._general(x)
+            return sparse_expect(self.matrix, self.swap_entries, self.emove, x)
         out = np.empty((self.n_states, len(self.moves), x.shape[1]))
         for b in range(len(self.moves)):
-            out[:, b] = self._product(x, b)
+            out[:, b] = product_expect(self.matrices, self.emove, x, b)
         return out

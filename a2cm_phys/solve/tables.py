@@ -31,7 +31,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..config import Scenario
+from ..config import SCRIPTED_EVADERS, Scenario
 from ..envs.core import default_start
 from ..envs.evaders.scripted import STAY
 from ..envs.grid import GridRules
@@ -62,6 +62,12 @@ def state_cells(scenario: Scenario, index: np.ndarray | None = None) -> np.ndarr
     return np.stack(np.unravel_index(index, state_shape(scenario))).astype(np.int64)
 
 
+def state_of_cells(scenario: Scenario, cells: np.ndarray) -> np.ndarray:
+    """State indices of cells ``(N + 1, …)`` (pursuers, then the evader): the inverse of
+    :func:`state_cells`."""
+    return np.ravel_multi_index(tuple(np.asarray(cells)), state_shape(scenario))
+
+
 def valid_states(scenario: Scenario) -> np.ndarray:
     """``(S,)`` mask of states that can occur: no pursuer on the evader's cell."""
     cells = state_cells(scenario)
@@ -77,7 +83,7 @@ def state_index(scenario: Scenario, positions: np.ndarray) -> np.ndarray:
     if np.any((xy < 0) | (xy >= size)):
         raise ValueError(f"positions off the {size}x{size} arena")
     cells = xy[..., 0] + size * xy[..., 1]
-    return np.ravel_multi_index(tuple(np.moveaxis(cells, -1, 0)), state_shape(scenario))
+    return state_of_cells(scenario, np.moveaxis(cells, -1, 0))
 
 
 def start_state(scenario: Scenario) -> int:
@@ -109,6 +115,13 @@ def uniform_table(scenario: Scenario, agents: int) -> np.ndarray:
     return np.full((n_states(scenario), agents, a), 1.0 / a)
 
 
+def joint_actions(scenario: Scenario, joint: np.ndarray) -> np.ndarray:
+    """Per-pursuer actions ``(K, N)`` int64 of joint action indices ``(K,)``
+    ``(a_0 · A + a_1) · A + …``."""
+    shape = (scenario.actions,) * scenario.pursuers
+    return np.stack(np.unravel_index(np.asarray(joint), shape), axis=-1).astype(np.int64)
+
+
 def joint_policy_table(scenario: Scenario, joint: np.ndarray) -> np.ndarray:
     """The pursuers' table ``(S, N, A)`` of a deterministic joint policy.
 
@@ -116,7 +129,7 @@ def joint_policy_table(scenario: Scenario, joint: np.ndarray) -> np.ndarray:
     ``policy`` array).
     """
     n, a = scenario.pursuers, scenario.actions
-    actions = np.stack(np.unravel_index(np.asarray(joint), (a,) * n), axis=-1)  # (S, N)
+    actions = joint_actions(scenario, joint)  # (S, N)
     table = np.zeros((len(actions), n, a))
     np.put_along_axis(table, actions[..., None], 1.0, axis=-1)
     return table
@@ -157,9 +170,6 @@ def flee_law(scenario: Scenario) -> np.ndarray:
     dist = np.abs(cand[None] - pursuers[:, :, None, :]).sum(-1).min(0)  # (S, A)
     best = dist == dist.max(axis=1, keepdims=True)
     return best / best.sum(axis=1, keepdims=True)
-
-
-SCRIPTED_EVADERS = ("random", "flee", "static")
 
 
 def scripted_evader_table(scenario: Scenario, name: str) -> np.ndarray:

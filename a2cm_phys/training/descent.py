@@ -5,7 +5,7 @@ Self-play's learned evader is far from a best response, so pursuers trained agai
 (simultaneously or against a pool, :mod:`a2cm_phys.training.opponents`) stay exploitable: an evader
 that plays the exact best response escapes them for good (``BENCHMARKS.md``). On a grid
 the exact best response is computable, and so is the gradient of its value in the
-pursuers' policy (:mod:`a2cm_phys.solve.descent`). With ``descent_every = K`` the
+pursuers' policy (:mod:`a2cm_phys.solve.worst_case`). With ``descent_every = K`` the
 pursuers' actors learn from that gradient alone: every K updates
 :class:`ExploitabilityDescent` computes it for their current actors and takes
 ``descent_steps`` Adam steps (step size ``descent_lr``) along it. The rollouts go on as in
@@ -47,50 +47,25 @@ from .seeding import descent_rng, evader_descent_rng
 
 
 def check_descent(scenario: Scenario, cfg: Train) -> None:
-    """Exploitability descent and one-hot inputs need a grid (and descent one the exact
-    solver can hold): a :class:`ConfigError` naming the key if not."""
-    if cfg.descent_teams == "both" and not cfg.descent_every:
-        raise ConfigError(
-            "training options: key 'descent_teams': 'both' needs exploitability descent"
-            " (descent_every > 0, or --preset descent)"
-        )
-    if cfg.descent_every:
-        if scenario.mode != "grid" or scenario.evader != "learned":
-            raise ConfigError(
-                "training options: key 'descent_every': exploitability descent needs grid"
-                f" self-play, and scenario '{scenario.name}' is in {scenario.mode} mode with"
-                f" evader = '{scenario.evader}' (use grid_vs, or descent_every = 0)"
-            )
-        from ..solve.pursuer_step import check_size
-
-        try:
-            check_size(scenario, "general")
-        except (TooLargeError, UnsupportedError) as err:
-            raise ConfigError(f"training options: key 'descent_every': {err}") from None
-        if cfg.descent_teams == "both":
-            _check_evader_descent(scenario)
-    if cfg.encoding == "onehot" and scenario.mode != "grid":
-        raise ConfigError(
-            "training options: key 'encoding': one-hot cells need a grid, and scenario"
-            f" '{scenario.name}' is in {scenario.mode} mode (use encoding = 'xy')"
-        )
-
-
-def _check_evader_descent(scenario: Scenario) -> None:
-    """The evader's descent needs the oracle against a table, and a worst case that
-    capture time measures (no collision may end the episode)."""
-    if scenario.collisions.mode == "terminate":
-        raise ConfigError(
-            "training options: key 'descent_teams': with collisions.mode = 'terminate' the"
-            " pursuers' best response could end the episode by colliding, so the evader has"
-            " no worst case to raise (use descent_teams = 'pursuers')"
-        )
+    """Whether the exact solvers that descent needs can hold the arena: a
+    :class:`ConfigError` naming ``descent_every`` (or ``descent_teams`` for the evader's
+    descent) if not. Every other check of the options is
+    :func:`~a2cm_phys.config.resolve_train`'s; this one is made when descent is set up,
+    since only the solvers know their limits."""
+    if not cfg.descent_every:
+        return
     from ..solve.model import GridModel
+    from ..solve.pursuer_step import check_size
 
     try:
-        GridModel(scenario, evader_probs=uniform_table(scenario, 1))
+        check_size(scenario, "general")
     except (TooLargeError, UnsupportedError) as err:
-        raise ConfigError(f"training options: key 'descent_teams': {err}") from None
+        raise ConfigError(f"training options: key 'descent_every': {err}") from None
+    if cfg.descent_teams == "both":  # the oracle's backup against the evader's table
+        try:
+            GridModel(scenario, evader_probs=uniform_table(scenario, 1))
+        except (TooLargeError, UnsupportedError) as err:
+            raise ConfigError(f"training options: key 'descent_teams': {err}") from None
 
 
 class ExploitabilityDescent:
@@ -111,8 +86,9 @@ class ExploitabilityDescent:
         seed: int,
         evader: ActorCritic | None = None,
     ) -> None:
-        from ..solve.descent import EvaderGradient, WorstCaseGradient
+        from ..solve.worst_case import EvaderGradient, WorstCaseGradient
 
+        check_descent(scenario, cfg)
         self.scenario, self.model, self.steps = scenario, model, cfg.descent_steps
         self.gradient = WorstCaseGradient(scenario, cfg.gamma)
         self.optimizer = _actor_adam(model, cfg.descent_lr)

@@ -49,7 +49,6 @@ from typing import Any, Literal
 import torch
 
 from ..algos import ActorCritic
-from ..config import ConfigError, Scenario, Train
 from .seeding import opponent_rng
 
 Side = Literal["pursuers", "evader"]
@@ -62,16 +61,6 @@ PairingKind = Literal["latest", "past_evader", "past_pursuers"]
 PAIRING_CODES: dict[str, int] = {"latest": 0, "past_evader": 1, "past_pursuers": 2}
 """The update metric ``pool_pairing`` of each pairing (``pool_snapshot_update`` is the
 update at which the past side's snapshot was taken, -1 when both are latest)."""
-
-
-def check_pool(scenario: Scenario, cfg: Train) -> None:
-    """The pool needs a learned evader: a :class:`ConfigError` naming the key if not."""
-    if cfg.pool_every and scenario.evader != "learned":
-        raise ConfigError(
-            f"training options: key 'pool_every': a pool of past opponents needs a learned"
-            f" evader, and scenario '{scenario.name}' has evader = '{scenario.evader}'"
-            " (use grid_vs, phys_vs or phys_cont_vs, or pool_every = 0)"
-        )
 
 
 def actor_weights(model: ActorCritic) -> dict[str, torch.Tensor]:

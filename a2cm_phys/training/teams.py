@@ -16,7 +16,7 @@ import numpy as np
 
 from ..algos import ActorCritic, Learner, make_model
 from ..algos.shaping import ProgressShaping
-from ..config import Scenario, Train, resolve_train
+from ..config import Scenario, Train
 from .rollout import allocate_batch, allocate_evader_batch
 from .seeding import evader_weights_generator
 
@@ -40,8 +40,8 @@ def evader_train_cfg(cfg: Train) -> Train:
 
 
 def make_teams(scenario: Scenario, cfg: Train) -> tuple[Team, Team | None]:
-    """The pursuers' team and, if the scenario's evader is learned, the evader's."""
-    cfg = resolve_train(scenario, cfg)
+    """The pursuers' team and, if the scenario's evader is learned, the evader's, for a
+    resolved ``cfg`` (:func:`~a2cm_phys.config.resolve_train`)."""
     model = make_model(cfg, scenario)
     batch = allocate_batch(
         cfg.steps_per_env,

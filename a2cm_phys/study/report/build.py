@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from ...base.versions import __version__
-from .claims import Data, our_claims, paper_claims
+from .claims import Claim, Data, our_claims, paper_claims
 from .markdown import report
 from .measure import (
     RunResult,
@@ -86,8 +86,9 @@ def collect(
 
 
 def _figures(data: Data, out: Path, groups: list[str], modes: list[str]) -> dict[str, Path]:
-    from ...analysis.figures import Panel, Reference, Run, load_logged_run, plot_aggregate
-    from ...record.reader import LogError
+    from ...analysis.figures import Panel, Reference, plot_aggregate
+    from ...analysis.run_series import Run, load_logged_run
+    from ...record.runlog import LogError
 
     def loaded(results: list[RunResult]) -> list[Run]:
         out = []
@@ -163,42 +164,77 @@ def build_report(
     cache = logdir / "report_cache.json"
     by_cell, missing = collect(runs, errors, args.eval_episodes)
     data = Data(by_cell, {}, modes=modes, groups=groups)
-    overrides = {r.cell.scenario: r.spec.overrides for r in runs}
-    for group, scenario, _ in by_cell:
-        if group in ("paper", "ours") and scenario not in data.references:
-            data.references[scenario] = reference(
-                scenario, overrides[scenario], args.eval_episodes, cache
-            )
-        elif group == "continuous" and scenario not in data.pursuit:
-            data.pursuit[scenario] = reference(
-                scenario, overrides[scenario], args.eval_episodes, cache
-            )
-    crossplay: list[dict[str, Any]] = []
-    if "selfplay" in groups:
-        sp = {a: data.runs("selfplay", "grid_vs", a) for a in ("a2cm", "a2c")}
-        horizon = args.exploit_max_steps
-        if any(sp.values()) and not args.no_exploit:
-            data.oracle_worst_case = oracle_worst_case("grid_vs", horizon, cache)
-            data.minimax = minimax_bounds("grid_vs", horizon, cache)
-            for algo, results in sp.items():
-                data.exploit[algo] = [{**exploit(r.run, horizon), "seed": r.seed} for r in results]
-        pursuers: dict[str, list[str]] = {"oracle": ["oracle"], "minimax": ["minimax"]}
-        evaders: dict[str, list[str]] = {"random": ["random"], "flee": ["flee"]}
-        for algo, results in sp.items():
-            dirs = [str(r.run.run_dir) for r in sorted(results, key=lambda r: r.seed)]
-            if dirs:
-                pursuers[f"{algo.upper()} self-play"] = dirs
-                evaders[f"{algo.upper()} self-play evader"] = dirs
-        vs_random = data.runs("ours", "grid", "a2cm")
-        if vs_random:
-            pursuers["A2CM vs random (ours)"] = [
-                str(r.run.run_dir) for r in sorted(vs_random, key=lambda r: r.seed)
-            ]
-        if len(pursuers) > 1:
-            crossplay = cross_play("grid_vs", pursuers, evaders, args.crossplay_episodes, cache)
-            data.crossplay = crossplay
+    add_references(data, runs, args.eval_episodes, cache)
+    crossplay = add_self_play(data, args, cache) if "selfplay" in groups else []
     figures = _figures(data, out, groups, modes)
     claims = paper_claims(data) + our_claims(data)
+    elapsed, sessions = record_session(logdir, meta, start)
+    runs_measured = sum(len(v) for v in by_cell.values())
+    meta = {**meta, "version": __version__, "runs": runs_measured, "elapsed": elapsed}
+    meta.update(session_totals(sessions))
+    (out / "RESULTS.md").write_text(report(data, claims, out, figures, crossplay, missing, meta))
+    results = results_json(data, claims, crossplay, missing, meta)
+    (out / "results.json").write_text(json.dumps(results, indent=1, default=str) + "\n")
+    return missing
+
+
+def add_references(data: Data, runs: list[PlannedRun], episodes: int, cache: Path) -> None:
+    """The reference of each measured scenario (:func:`~.measure.reference`) into
+    ``data``: the preset groups' in ``references``, the continuous group's (``pursuit``)
+    in ``pursuit``."""
+    overrides = {r.cell.scenario: r.spec.overrides for r in runs}
+    for group, scenario, _ in data.by_cell:
+        if group in ("paper", "ours") and scenario not in data.references:
+            data.references[scenario] = reference(scenario, overrides[scenario], episodes, cache)
+        elif group == "continuous" and scenario not in data.pursuit:
+            data.pursuit[scenario] = reference(scenario, overrides[scenario], episodes, cache)
+
+
+def add_self_play(data: Data, args: argparse.Namespace, cache: Path) -> list[dict[str, Any]]:
+    """The self-play group's exact measures into ``data`` (unless ``--no-exploit``): each
+    run's exploitability, the oracle's worst case and the minimax bounds; then the
+    cross-play table (also ``data.crossplay``), or ``[]`` with no learned side to play."""
+    sp = {a: data.runs("selfplay", "grid_vs", a) for a in ("a2cm", "a2c")}
+    horizon = args.exploit_max_steps
+    if any(sp.values()) and not args.no_exploit:
+        data.oracle_worst_case = oracle_worst_case("grid_vs", horizon, cache)
+        data.minimax = minimax_bounds("grid_vs", horizon, cache)
+        for algo, results in sp.items():
+            data.exploit[algo] = [{**exploit(r.run, horizon), "seed": r.seed} for r in results]
+    pursuers, evaders = crossplay_sides(data, sp)
+    if len(pursuers) <= 1:
+        return []
+    data.crossplay = cross_play("grid_vs", pursuers, evaders, args.crossplay_episodes, cache)
+    return data.crossplay
+
+
+def crossplay_sides(
+    data: Data, selfplay: dict[str, list[RunResult]]
+) -> tuple[dict[str, list[str]], dict[str, list[str]]]:
+    """The cross-play's pursuer and evader groups: the named policies, each self-play
+    algorithm's runs (seeds in order) on both sides, and our A2CM trained against the
+    random evader as pursuers."""
+    pursuers: dict[str, list[str]] = {"oracle": ["oracle"], "minimax": ["minimax"]}
+    evaders: dict[str, list[str]] = {"random": ["random"], "flee": ["flee"]}
+    for algo, results in selfplay.items():
+        dirs = [str(r.run.run_dir) for r in sorted(results, key=lambda r: r.seed)]
+        if dirs:
+            pursuers[f"{algo.upper()} self-play"] = dirs
+            evaders[f"{algo.upper()} self-play evader"] = dirs
+    vs_random = data.runs("ours", "grid", "a2cm")
+    if vs_random:
+        pursuers["A2CM vs random (ours)"] = [
+            str(r.run.run_dir) for r in sorted(vs_random, key=lambda r: r.seed)
+        ]
+    return pursuers, evaders
+
+
+def record_session(
+    logdir: Path, meta: dict[str, Any], start: float
+) -> tuple[float, list[dict[str, Any]]]:
+    """Add this session (its command, date and training from ``meta``; started at
+    ``start``, :func:`time.perf_counter`) to the log folder's ``report_sessions.json``;
+    return its time and every session recorded."""
     sessions_path = logdir / "report_sessions.json"
     try:
         sessions = json.loads(sessions_path.read_text()) if sessions_path.exists() else []
@@ -215,14 +251,18 @@ def build_report(
         }
     )
     sessions_path.write_text(json.dumps(sessions, indent=1) + "\n")
-    meta = {
-        **meta,
-        "version": __version__,
-        "runs": sum(len(v) for v in by_cell.values()),
-        "elapsed": elapsed,
-        **session_totals(sessions),
-    }
-    (out / "RESULTS.md").write_text(report(data, claims, out, figures, crossplay, missing, meta))
+    return elapsed, sessions
+
+
+def results_json(
+    data: Data,
+    claims: list[Claim],
+    crossplay: list[dict[str, Any]],
+    missing: list[tuple[PlannedRun, str]],
+    meta: dict[str, Any],
+) -> dict[str, Any]:
+    """``results.json``: the meta, the claims, every measured run, the references (their
+    episodes' lengths left out) and the self-play measures."""
     rows = [
         {
             "group": r.run.cell.group,
@@ -237,7 +277,7 @@ def build_report(
             "greedy": r.greedy,
             "run_dir": str(r.run.run_dir),
         }
-        for results in by_cell.values()
+        for results in data.by_cell.values()
         for r in results
     ]
     results = {
@@ -257,5 +297,4 @@ def build_report(
     for ref in results["references"].values():
         if ref:
             ref.pop("lengths", None)
-    (out / "results.json").write_text(json.dumps(results, indent=1, default=str) + "\n")
-    return missing
+    return results

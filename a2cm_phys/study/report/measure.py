@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ...config import ConfigError, Scenario, load_scenario
+from ...config import Scenario, load_scenario
 from .plan import PlannedRun
 
 EVAL_SEED = 10_000
@@ -68,7 +68,7 @@ class RunResult:
 
 def training_figures(run_dir: Path) -> dict[str, float]:
     """Episodes, env steps and the last 10% (by env steps) of a run's log."""
-    from ...analysis.figures import episode_env_steps
+    from ...analysis.run_series import episode_env_steps
     from ...record import read_run
 
     log = read_run(run_dir)
@@ -145,46 +145,22 @@ def measure(run: PlannedRun, summary: dict[str, Any], eval_episodes: int) -> Run
 def reference(
     scenario_name: str, overrides: dict[str, Any], episodes: int, cache: Path
 ) -> dict[str, Any] | None:
-    """The reference of a scenario: the exact optimum on grids (``exact``), else the
-    oracle driven in physics (discrete control) or ``pursuit`` (continuous), played
-    greedy over ``episodes`` episodes with their figures; ``None`` if there is none."""
+    """The reference of a scenario (:func:`~a2cm_phys.analysis.evaluation.reference_of`):
+    the exact optimum on grids (``exact``), else the oracle driven in physics (discrete
+    control) or ``pursuit`` (continuous), played over ``episodes`` episodes with their
+    figures; ``None`` if there is none."""
     scenario = load_scenario(scenario_name, overrides)
     key = json.dumps(["reference", scenario_name, overrides, episodes], sort_keys=True)
 
     def compute() -> dict[str, Any] | None:
-        from ...analysis.evaluation import optimum, play
-        from ...analysis.policies import pursuer_policy
+        from ...analysis.evaluation import reference_of
 
-        if scenario.mode == "grid":
-            best = optimum(scenario)
-            if best is None:
-                return None
-            return {"policy": "optimum (exact oracle)", "exact": True, **best,
-                    "length": best["capture_steps"]}  # fmt: skip
-        name = "pursuit" if scenario.continuous else "oracle"
-        try:
-            policy = pursuer_policy(name, scenario)
-        except ConfigError:
+        ref = reference_of(scenario, episodes=episodes, seed=EVAL_SEED)
+        if ref is None or ref.unavailable is not None:
             return None
-        result = play(scenario, policy, episodes, seed=EVAL_SEED)
-        return {"policy": f"{name} (played)", "exact": False, **_result_dict(result)}
-
-    return _cached(cache, key, compute)
-
-
-def extra_reference(
-    scenario_name: str, policy: str, overrides: dict[str, Any], episodes: int, cache: Path
-) -> dict[str, Any]:
-    """A named pursuer policy played greedy on a scenario (e.g. ``pursuit`` in physics)."""
-    scenario = load_scenario(scenario_name, overrides)
-    key = json.dumps(["policy", scenario_name, policy, overrides, episodes], sort_keys=True)
-
-    def compute() -> dict[str, Any]:
-        from ...analysis.evaluation import play
-        from ...analysis.policies import pursuer_policy
-
-        result = play(scenario, pursuer_policy(policy, scenario), episodes, seed=EVAL_SEED)
-        return {"policy": f"{policy} (played)", "exact": False, **_result_dict(result)}
+        if ref.exact:
+            return {"policy": ref.label, "exact": True, **ref.optimum, "length": ref.length}
+        return {"policy": ref.label, "exact": False, **_result_dict(ref.played)}
 
     return _cached(cache, key, compute)
 

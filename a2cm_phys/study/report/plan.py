@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ...config import ConfigError, load_scenario, preset
+from ...config import ConfigError, preset
 from ..sweep import RunSpec, check_reusable, execute, run_state
 
 GROUPS = ("paper", "ours", "continuous", "selfplay")
@@ -205,11 +205,7 @@ def estimate_seconds(
 ) -> float:
     """Estimated seconds of one run: training (remaining updates), its greedy evaluation
     and, for self-play, the exact exploitability."""
-    from ...config import load_train, resolve_train
-
-    scenario = load_scenario(run.spec.scenario, run.spec.overrides)
-    train = {**run.spec.train, "algo": run.spec.algo, "seed": run.spec.seed}
-    cfg = resolve_train(scenario, load_train(train))
+    scenario, cfg = run.spec.resolve()
     seconds = 0.0
     if run.state != "done":
         seconds += est.per_update * cfg.updates

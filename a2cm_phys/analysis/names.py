@@ -1,0 +1,73 @@
+"""Every policy a command can name, once: what ``--pursuers`` and ``--evader`` accept.
+
+``evaluate`` plays a named policy in episodes (:mod:`a2cm_phys.analysis.policies`), and
+``oracle`` reads one as an exact policy table (:mod:`a2cm_phys.analysis.sources`); not every
+name has both forms (``pursuit`` has no table, the best-response evader is solved for the
+pairing it plays). Anything else given for ``--pursuers`` or ``--evader`` is a run directory.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from ..config import SCRIPTED_EVADERS
+
+Side = Literal["pursuers", "evader"]
+
+
+@dataclass(frozen=True)
+class NamedPolicy:
+    """One named policy: its side, what it is, and the forms it has (``played``: a rollout
+    policy for ``evaluate``; ``tabled``: an exact table for ``oracle``)."""
+
+    name: str
+    side: Side
+    about: str
+    played: bool = True
+    tabled: bool = True
+
+
+NAMED_POLICIES: tuple[NamedPolicy, ...] = (
+    NamedPolicy("random", "pursuers", "uniformly random moves (or commands in the unit square)"),
+    NamedPolicy("pursuit", "pursuers", "each pursuer straight at the evader", tabled=False),
+    NamedPolicy("oracle", "pursuers", "the exact optimum against the scenario's scripted evader"),
+    NamedPolicy("minimax", "pursuers", "the team optimal when the evader sees its move (grids)"),
+    *(NamedPolicy(e, "evader", f"the scripted {e} evader") for e in SCRIPTED_EVADERS),
+    NamedPolicy("best-response", "evader", "the best response to the pursuers", tabled=False),
+    NamedPolicy("equilibrium", "evader", "the game's equilibrium evader (grids; minutes to solve)"),
+)  # fmt: skip
+"""The registry: every name, in the order help texts list them."""
+
+
+def policy_names(side: Side, form: Literal["played", "tabled"] = "played") -> tuple[str, ...]:
+    """The names of ``side``'s policies that have ``form``."""
+    return tuple(p.name for p in NAMED_POLICIES if p.side == side and getattr(p, form))
+
+
+PURSUER_POLICIES = policy_names("pursuers")
+"""Pursuers ``evaluate`` plays by name."""
+
+PURSUER_TABLES = policy_names("pursuers", "tabled")
+"""Pursuers ``oracle`` reads as exact tables by name."""
+
+EVADER_POLICIES = SCRIPTED_EVADERS
+"""Evaders the scenario's core plays by a fixed rule."""
+
+BEST_RESPONSE = "best-response"
+"""The evader that is the exact best response to the pursuers of the pairing."""
+
+EQUILIBRIUM = "equilibrium"
+"""The game's equilibrium evader: mixed, so always sampled; no team catches it sooner on
+average than the game's value."""
+
+SOLVED_EVADERS = tuple(n for n in policy_names("evader") if n not in EVADER_POLICIES)
+"""Evaders the exact solvers give (grids only)."""
+
+EVADER_TABLES = policy_names("evader", "tabled")
+"""Evaders ``oracle`` reads as exact tables by name."""
+
+
+def is_named(spec: str, side: Side) -> bool:
+    """Whether ``spec`` names one of ``side``'s policies (else it is a run directory)."""
+    return spec in policy_names(side)

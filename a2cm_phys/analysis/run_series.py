@@ -1,0 +1,125 @@
+"""A run's per-episode series, read from its log alone (what :mod:`.figures` draws).
+
+A run folder's log parts are read as one run, each episode once
+(:mod:`a2cm_phys.record.parts`); a damaged or empty log is an error, not an empty series
+(:func:`load_logged_run`). Each episode is placed on the run's environment steps
+(:func:`episode_env_steps`), and the exact exploitability a run logged every K updates is
+kept beside its episodes (:data:`EXPLOIT_SERIES`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..config import Scenario
+from ..record.parts import read_run
+from ..record.runlog import LogError, RunLog
+
+EXPLOIT_SERIES = (
+    ("exploit_worst_case", "evader's best response (pursuers' worst case)", "-"),
+    ("exploit_pursuers_br", "pursuers' best response to the learned evader", "--"),
+    ("descent_value", "best response the descent trains against (discounted)", ":"),
+    ("evader_descent_value", "pursuers' best response the evader's descent meets", "-."),
+)
+"""(update metric, legend text, line style) of the exploitability figure."""
+
+
+@dataclass
+class Run:
+    """One run's per-episode series, read from its log(s)."""
+
+    label: str
+    title: str
+    columns: dict[str, np.ndarray]
+    clean: bool
+    exploit: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    """Sparse update metrics of :data:`EXPLOIT_SERIES`: ``(env_steps, values)`` where logged."""
+    scenario: Scenario | None = None
+    """The run's resolved scenario (from its log's metadata)."""
+    problems: list[str] = field(default_factory=list)
+    """Parts of its log that could not be read though no episode is missing (to report)."""
+
+
+def log_files(path: Path) -> list[Path]:
+    """The log files of a run: ``path`` itself, or a run folder's parts in session order."""
+    from ..record.parts import part_files
+
+    if path.is_dir():
+        files = part_files(path)
+        if not files:
+            raise LogError(f"{path}: no episodes.mcap in this folder")
+        return files
+    if not path.exists():
+        raise LogError(f"{path}: no such file or folder")
+    return [path]
+
+
+def load_logged_run(path: Path) -> Run:
+    """Read a run (every part of a run folder's log, each episode once) or one log file.
+
+    A :class:`LogError` if the log is damaged, misses episodes or holds no finished
+    episode: a figure of nothing, or of a silently shortened run, would mislead. A part that
+    cannot be read while every episode is still there (a later part holds them) is named in
+    :attr:`Run.problems`.
+    """
+    if not path.exists():
+        raise LogError(f"{path}: no such file or folder")
+    log = read_run(path)
+    if log.damaged:
+        raise LogError(f"{path}: the log is damaged ({log.error}); see python -m a2cm_phys.replay")
+    if not log.n_episodes:
+        raise LogError(f"{path}: the log holds no finished episode")
+    ids = log.episodes["episode"]
+    if log.problems and not np.array_equal(ids, np.arange(len(ids))):
+        raise LogError(f"{path}: episodes are missing ({'; '.join(log.problems)})")
+    columns = {k: log.episodes[k] for k in ("return", "length", "collisions", "captured")}
+    columns["env_steps"] = episode_env_steps(log)
+    sc = log.scenario
+    title = f"{sc.name} ({sc.mode}, collisions {sc.collisions.mode}, {sc.evader} evader)"
+    return Run(
+        label=log.label,
+        title=title,
+        columns=columns,
+        clean=log.clean,
+        exploit=_exploit(log),
+        scenario=sc,
+        problems=list(log.problems),
+    )
+
+
+def episode_env_steps(log: RunLog) -> np.ndarray:
+    """Environment steps of the whole run (all games) when each episode ended.
+
+    The games step together, so an episode that ends at step ``k`` of its game ends after
+    about ``k × num_envs`` steps of the run; ``k`` is the sum of the lengths of its game's
+    episodes so far (a game restarted on a physics resume loses its unfinished episode).
+    """
+    lengths = np.asarray(log.episodes["length"], dtype=np.int64)
+    games = np.asarray(log.episodes["env"], dtype=np.int64)
+    train = log.metadata.get("train")
+    num_envs = int(train.get("num_envs", 1)) if isinstance(train, dict) else 1
+    num_envs = max(num_envs, int(games.max(initial=-1)) + 1)
+    per_game = np.zeros(len(lengths), dtype=np.int64)
+    for g in np.unique(games):
+        mask = games == g
+        per_game[mask] = np.cumsum(lengths[mask])
+    return per_game * num_envs
+
+
+def _exploit(log: RunLog) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each exploitability metric's ``(env_steps, values)`` over the updates that logged it
+    (a finite value; absent, null or NaN elsewhere)."""
+    out = {}
+    for key, _, _ in EXPLOIT_SERIES:
+        pairs = [
+            (u["env_steps"], float(u[key]))
+            for u in log.updates
+            if isinstance(u.get(key), (int, float)) and np.isfinite(u[key])
+        ]
+        if pairs:
+            steps, values = np.array(pairs, dtype=np.float64).T
+            out[key] = (steps, values)
+    return out

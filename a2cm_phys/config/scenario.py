@@ -1,0 +1,174 @@
+"""The scenario: one pursuit game as frozen, typed data (arena, agents, evader, time limit,
+rewards, collisions, physics), validated when built."""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from dataclasses import dataclass, field
+from typing import Literal
+
+from .parse import InvalidKey, check_limits
+
+Mode = Literal["grid", "physics"]
+EvaderPolicy = Literal["random", "flee", "static", "learned"]  # learned: an agent (SPEC §1b)
+EvaderReward = Literal["zero_sum", "survival"]
+CollisionMode = Literal["off", "terminate", "penalize"]
+Control = Literal["discrete", "continuous"]
+
+SCRIPTED_EVADERS: tuple[str, ...] = tuple(
+    e for e in typing.get_args(EvaderPolicy) if e != "learned"
+)
+"""The evaders the core plays by a fixed rule (a learned one is an agent of its own)."""
+
+DEFAULT_DT = {"discrete": 1.0, "continuous": 0.1}
+"""The control period ``physics.dt`` (s) of each control type when a scenario omits it."""
+
+
+@dataclass(frozen=True)
+class Rewards:
+    """Team reward terms (SPEC §4); the reward is logged raw, learners may scale it.
+
+    ``evader`` is a learned evader's reward (SPEC §1b): ``zero_sum``, minus the team reward,
+    or ``survival``, +1 for every step that does not end in its capture (its return is the
+    number of steps it survived). Scripted evaders have no reward.
+    """
+
+    step: float = -1.0
+    collision: float = 0.0
+    capture: float = 0.0
+    wall: float = 0.0
+    evader: EvaderReward = "zero_sum"
+
+
+@dataclass(frozen=True)
+class Collisions:
+    """How pursuer–pursuer collisions count: ``off``, ``terminate`` or ``penalize``."""
+
+    mode: CollisionMode = "off"
+
+
+@dataclass(frozen=True)
+class Physics:
+    """Physical parameters of physics mode (SPEC §3); one grid cell is one metre."""
+
+    box_side: float = 0.6
+    evader_radius: float = 0.3
+    mass: float = 1.0
+    max_speed: float = 1.0
+    dt: float | None = None  # control period (s); None: DEFAULT_DT of the scenario's control
+    substeps: int = 10  # fixed solver steps per control period
+    wall_thickness: float = 1.0
+    max_force: float = 50.0
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the key of the first impossible value."""
+        for key in (
+            "box_side",
+            "evader_radius",
+            "mass",
+            "max_speed",
+            "wall_thickness",
+            "max_force",
+        ):
+            if not getattr(self, key) > 0:
+                raise InvalidKey(f"physics.{key}", f"must be > 0, got {getattr(self, key)!r}")
+        if self.box_side >= 1.0:
+            raise InvalidKey("physics.box_side", f"must be < 1 (one cell), got {self.box_side!r}")
+        if self.evader_radius >= 0.5:
+            raise InvalidKey("physics.evader_radius", f"must be < 0.5, got {self.evader_radius!r}")
+        if self.dt is not None and not self.dt > 0:
+            raise InvalidKey("physics.dt", f"must be > 0, got {self.dt!r}")
+        if self.substeps < 1:
+            raise InvalidKey("physics.substeps", f"must be >= 1, got {self.substeps!r}")
+
+    def check_substeps(self) -> None:
+        """Refuse substeps so long that two bodies closing at ``2 × max_speed`` could pass
+        through the smallest body in one substep (``2 · max_speed · dt / substeps``)."""
+        smallest = min(self.box_side, 2 * self.evader_radius)
+        dt = 1.0 if self.dt is None else self.dt
+        reach = 2 * self.max_speed * dt / self.substeps
+        if reach >= smallest:
+            raise InvalidKey(
+                "physics.substeps",
+                f"physics.substeps = {self.substeps} is too few: two agents closing at "
+                f"2 × max_speed would move {reach:g} m per substep (dt = {dt:g} s), enough "
+                f"to pass through a {smallest:g} m body; use more than "
+                f"{int(2 * self.max_speed * dt / smallest)} substeps",
+            )
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One pursuit game: arena, agents, evader, time limit, rewards and collision mode."""
+
+    name: str = "custom"
+    mode: Mode = "grid"
+    size: int = 5
+    pursuers: int = 3
+    actions: int = 4
+    control: Control = "discrete"  # physics mode: "continuous" steers with velocity commands
+    evader: EvaderPolicy = "random"
+    max_steps: int = 1000
+    rewards: Rewards = field(default_factory=Rewards)
+    collisions: Collisions = field(default_factory=Collisions)
+    physics: Physics = field(default_factory=Physics)
+
+    def __post_init__(self) -> None:
+        if self.physics.dt is None:  # the control type decides the default period
+            physics = dataclasses.replace(self.physics, dt=DEFAULT_DT.get(self.control, 1.0))
+            object.__setattr__(self, "physics", physics)
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the key of the first impossible value."""
+        check_limits(self, SCENARIO_LIMITS)
+        if self.size < 2:
+            raise InvalidKey("size", f"must be >= 2, got {self.size}")
+        border = 4 * (self.size - 1)
+        if not 1 <= self.pursuers <= border:
+            raise InvalidKey(
+                "pursuers",
+                f"must be between 1 and {border} (the border cells), got {self.pursuers}",
+            )
+        if self.pursuers + 1 > self.size * self.size:
+            raise InvalidKey("pursuers", "leave no free cell for the evader")
+        if self.actions not in (4, 5):
+            raise InvalidKey("actions", f"must be 4 (paper) or 5 (adds stay), got {self.actions}")
+        if self.max_steps < 1:
+            raise InvalidKey("max_steps", f"must be >= 1, got {self.max_steps}")
+        self.physics.validate()
+        if self.mode == "physics":
+            self.physics.check_substeps()
+        elif self.control != "discrete":
+            raise InvalidKey(
+                "control", f"{self.control!r} needs mode = 'physics' (grid moves are discrete)"
+            )
+
+    @property
+    def continuous(self) -> bool:
+        """Whether pursuers steer with velocity commands (SPEC §3b) rather than discrete moves."""
+        return self.control == "continuous"
+
+    @property
+    def agents(self) -> list[str]:
+        """Names of the learning pursuers, in order."""
+        return [f"pursuer_{i}" for i in range(self.pursuers)]
+
+    @property
+    def obs_dim(self) -> int:
+        """Length of the global observation vector (SPEC §5)."""
+        per_agent = 4 if self.mode == "physics" else 2
+        return per_agent * (self.pursuers + 1)
+
+
+SCENARIO_LIMITS: dict[str, tuple[int, str]] = {
+    "size": (1000, "the arena's tables and pictures grow with size²"),
+    "pursuers": (64, "one actor per pursuer, each observing every agent"),
+    "max_steps": (1_000_000, "an episode's log is buffered in memory until it ends"),
+    "physics.substeps": (
+        10_000,
+        "each is a solver step of every game, about 5 µs: 10,000 already make one step take 50 ms",
+    ),
+}
+"""Largest values a scenario may ask for, with the reason: beyond them memory runs out, or
+a step takes so long that a run seems to hang. A dotted key is a key of a sub-table."""

@@ -1,0 +1,42 @@
+"""The channels of a run log: their schemas and channel records, registered with the MCAP
+writer when they are first needed (topics and schemas are described in :mod:`.schemas`)."""
+
+from __future__ import annotations
+
+from mcap.writer import Writer
+
+from .schemas import SCENE_SCHEMA, SCENE_TOPIC_PREFIX, SCHEMAS, schema_bytes
+
+
+class Channels:
+    """The channel ids of one log by topic: the topics of :data:`.schemas.SCHEMAS`, all
+    registered at once when the file is opened, then a scene topic per game, registered
+    (with the scene schema, the first time) when that game's first scene is written."""
+
+    def __init__(self, writer: Writer) -> None:
+        self._writer = writer
+        self._ids = {
+            topic: writer.register_channel(
+                topic,
+                "json",
+                writer.register_schema(schema["title"], "jsonschema", schema_bytes(schema)),
+            )
+            for topic, schema in SCHEMAS.items()
+        }
+        self._scene_schema = 0
+
+    def __getitem__(self, topic: str) -> int:
+        """The id of ``topic``'s channel; a scene topic's channel is registered on demand."""
+        channel = self._ids.get(topic)
+        if channel is None:
+            channel = self._ids[topic] = self._register_scene(topic)
+        return channel
+
+    def _register_scene(self, topic: str) -> int:
+        if not topic.startswith(SCENE_TOPIC_PREFIX):
+            raise KeyError(topic)
+        if not self._scene_schema:
+            self._scene_schema = self._writer.register_schema(
+                SCENE_SCHEMA["title"], "jsonschema", schema_bytes(SCENE_SCHEMA)
+            )
+        return self._writer.register_channel(topic, "json", self._scene_schema)

@@ -1,0 +1,99 @@
+"""Where each game's episode lies in the recorder's step buffers, and the finished episodes
+waiting to be written.
+
+Each vector step takes the next buffer row (:mod:`.buffers`); an episode that finishes in
+it is queued as a :class:`Finished` (its summary and rows), and its game's next episode
+begins at that row. When the buffers are full, the rows older than every running episode
+are dropped (after the queue has been written, since its episodes live in those rows).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..envs.vector import EpisodeSummary, VecStep, VectorEnv
+from .buffers import StepBuffers
+
+
+class Finished(NamedTuple):
+    """A finished episode waiting to be written: its summary, the buffer rows of its start
+    state (``first``) and last step (``last``), its contact events (physics, or grid games
+    with some; else ``None``) and whether the log holds it from its start (``whole``)."""
+
+    summary: EpisodeSummary
+    first: int
+    last: int
+    events: list | None
+    whole: bool
+
+
+class EpisodeRows:
+    """The step buffers of ``vec_env``, the row where each game's running episode began,
+    and the queue of finished episodes (see the module docs).
+
+    The buffers start with room for two episodes of ``max_steps``, within bounds; an
+    episode that fills them grows them, so memory follows the episodes that happen.
+    ``base`` is the log's clock (vector steps) at buffer row 0; it moves on as old rows are
+    dropped. Make it right after the env's reset (or at a resumed run's checkpoint).
+    """
+
+    def __init__(self, vec_env: VectorEnv, max_steps: int, base: int) -> None:
+        self.buf = StepBuffers(vec_env, min(max(2048, 2 * (max_steps + 2)), 8192))
+        self.base = base
+        self._vec = vec_env
+        b = vec_env.num_envs
+        self._events: list[list] = [[] for _ in range(b)]
+        self._begin = [0] * b  # buffer row of each game's episode start
+        # Games already inside an episode (a resumed run): their first steps are not ours to
+        # log, so those episodes get a summary but no trajectory.
+        t = np.asarray(getattr(vec_env.core, "t", 0))
+        self._partial = {int(i) for i in np.flatnonzero(t > 0)}
+        self._row = 0  # last buffer row written
+        self._queue: list[Finished] = []
+
+    @property
+    def full(self) -> bool:
+        """Whether the buffers have no row left for the next step."""
+        return self._row + 1 >= self.buf.rows
+
+    def add(self, actions: np.ndarray, step: VecStep) -> None:
+        """Copy one vector step into the next row and queue the episodes it finished."""
+        r = self._row = self._row + 1
+        buf = self.buf
+        buf.write(r, actions, step)
+        events = self._events
+        out = step.outcome
+        if out.events is not None:
+            for i, game_events in enumerate(out.events):
+                if game_events:
+                    events[i].extend(game_events)
+        if step.episodes:
+            buf.write_starts(r, self._vec)
+            begin, queue = self._begin, self._queue
+            physics = buf.vel is not None
+            for e in step.episodes:
+                ev = None
+                if physics or events[e.env]:
+                    ev, events[e.env] = events[e.env], []
+                whole = e.env not in self._partial
+                self._partial.discard(e.env)
+                queue.append(Finished(e, begin[e.env], r, ev, whole))
+                begin[e.env] = r
+
+    def take(self) -> list[Finished]:
+        """The queued episodes, in finishing order; the queue is left empty."""
+        queue, self._queue = self._queue, []
+        return queue
+
+    def compact(self) -> None:
+        """Drop the rows older than every running episode (the queue must be empty), and
+        grow the buffers if an episode fills them on its own."""
+        first = min(self._begin)
+        self.buf.keep(first, self._row)
+        self._begin = [b - first for b in self._begin]
+        self._row -= first
+        self.base += first
+        if self._row + 1 >= self.buf.rows:  # an episode longer than the buffer: grow it
+            self.buf.grow()

@@ -1,0 +1,52 @@
+"""The two halves of one update besides its bookkeeping (:meth:`.Trainer._one_update`):
+the players the update's pairing puts on the field for the rollout, and the learner steps
+of the teams that learn from it, with self-play's, descent's and exploitability's metrics."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .exploitability import exploitability, solvable
+from .opponents import PAIRING_CODES, Pairing
+from .rollout import Policy
+
+if TYPE_CHECKING:
+    from .trainer import Trainer
+
+EvaderPlayer = tuple[Policy, dict[str, np.ndarray]]
+"""A learned evader in a rollout: its policy and its batch (see :func:`.rollout.collect`)."""
+
+
+def players(trainer: Trainer, pairing: Pairing) -> tuple[Policy, EvaderPlayer | None]:
+    """The pursuers' policy and the learned evader's, if any, for a rollout: the live
+    models, or a past snapshot from the pool for the side ``pairing`` says."""
+    pool = trainer.pool
+    pursuers = trainer.model if pool is None else pool.player("pursuers", pairing)
+    if trainer.evader is None:
+        return pursuers.act, None
+    evader = trainer.evader.model if pool is None else pool.player("evader", pairing)
+    return pursuers.act, (evader.act, trainer.evader.batch)
+
+
+def learn(trainer: Trainer, pairing: Pairing, metrics: dict[str, float]) -> None:
+    """The learner steps of the teams ``pairing`` lets learn (by descent instead, every
+    ``descent_every`` updates, when the run descends), then the exploitability every
+    ``exploit_every`` updates; each step's metrics go into ``metrics`` as they come."""
+    cfg, evader, descent = trainer.cfg, trainer.evader, trainer.descent
+    progress = trainer.update / cfg.updates
+    if pairing.learns("pursuers") and descent is None:  # else: by descent, below
+        metrics.update(trainer.learner.update(trainer.batch, progress))
+    if evader is not None and pairing.learns("evader") and not trainer.evader_descends():
+        evader_metrics = evader.learner.update(evader.batch, progress)
+        metrics.update({f"evader_{k}": v for k, v in evader_metrics.items()})
+    if trainer.pool is not None:  # who played: see a2cm_phys.training.opponents.PAIRING_CODES
+        metrics["pool_pairing"] = PAIRING_CODES[pairing.kind]
+        metrics["pool_snapshot_update"] = pairing.taken_at
+    if descent is not None and (trainer.update + 1) % cfg.descent_every == 0:
+        metrics.update(descent.step())
+    every = cfg.exploit_every
+    if every and (trainer.update + 1) % every == 0 and solvable(trainer.scenario):
+        assert evader is not None
+        metrics.update(exploitability(trainer.scenario, trainer.model, evader.model))
