@@ -18,7 +18,7 @@ import pytest
 import torch
 from faults import TRAIN, invariant_problems, kill_at_write, kill_trial, new_run_args
 
-from a2cm_phys.analysis.figures import load_logged_run
+from a2cm_phys.analysis.run_series import load_logged_run
 from a2cm_phys.commands.replay import main as replay_main
 from a2cm_phys.commands.train import EXIT_NO_SPACE, main
 from a2cm_phys.record import LogError, read_run

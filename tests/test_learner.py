@@ -14,8 +14,10 @@ import torch.nn.functional as F
 from torch.distributions import Categorical
 
 from a2cm_phys.algos.distributions import GaussianActions
-from a2cm_phys.algos.learner import Learner, NonFiniteLoss
-from a2cm_phys.algos.models import ActorCritic, StackedLinear
+from a2cm_phys.algos.layers import StackedLinear
+from a2cm_phys.algos.learner import Learner
+from a2cm_phys.algos.losses import NonFiniteLoss
+from a2cm_phys.algos.models import ActorCritic
 from a2cm_phys.config import Train, load_scenario, load_train, preset, resolve_train
 from a2cm_phys.training.rollout import allocate_batch
 

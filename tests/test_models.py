@@ -8,14 +8,14 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from a2cm_phys.algos.distributions import CategoricalActions, GaussianActions
-from a2cm_phys.algos.models import (
-    ActorCritic,
-    OneHotCells,
-    StackedLinear,
-    make_model,
+from a2cm_phys.algos.distributions import (
+    CategoricalActions,
+    GaussianActions,
     sample_categorical,
 )
+from a2cm_phys.algos.encoding import OneHotCells
+from a2cm_phys.algos.layers import StackedLinear
+from a2cm_phys.algos.models import ActorCritic, make_model
 from a2cm_phys.config import Scenario, Train
 
 torch.set_num_threads(1)

@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from a2cm_phys.algos.models import StackedLinear
+from a2cm_phys.algos.layers import StackedLinear
 from a2cm_phys.algos.normalize import ValueNorm
 
 

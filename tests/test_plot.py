@@ -10,7 +10,8 @@ from PIL import Image
 from test_record import make_log
 from test_replay import damage_a_chunk
 
-from a2cm_phys.analysis.figures import load_logged_run, log_files, moving_average
+from a2cm_phys.analysis.figures import moving_average
+from a2cm_phys.analysis.run_series import load_logged_run, log_files
 from a2cm_phys.commands.plot import main
 from a2cm_phys.record import read_run
 from a2cm_phys.record.parts import new_part

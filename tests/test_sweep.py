@@ -9,8 +9,9 @@ import pytest
 
 from a2cm_phys.commands import sweep
 from a2cm_phys.commands.train import main as train_main
-from a2cm_phys.study import sweep as study_sweep
-from a2cm_phys.study.sweep import RunSpec, run_sequential
+from a2cm_phys.study import launch
+from a2cm_phys.study.launch import run_sequential
+from a2cm_phys.study.runspec import RunSpec
 
 TINY = {"updates": 4, "num_envs": 4, "batch_size": 16}
 KEYS = ("episodes", "mean_length_last_1000", "collisions", "steps")
@@ -134,13 +135,13 @@ def local_ray():
 def test_ray_sweep_equals_sequential_retries_failures_and_skips(tmp_path, local_ray):
     plan = specs()
     plan.append(RunSpec("grid", "a2cm", 9, {**TINY, "reward_scale": 1e300}, record=False))
-    outcomes = study_sweep.run_on_ray(plan, tmp_path / "ray", lambda o: None, None, 1.0)
+    outcomes = launch.run_on_ray(plan, tmp_path / "ray", lambda o: None, None, 1.0)
     by_name = {o.spec.name: o for o in outcomes}
     assert by_name[plan[-1].name].error and "nonfinite" in by_name[plan[-1].name].error
     reference = run_sequential(plan[:-1], tmp_path / "seq", lambda o: None)
     for ref in reference:
         assert same(by_name[ref.spec.name].summary, ref.summary)
-    again = study_sweep.run_on_ray(plan[:-1], tmp_path / "ray", lambda o: None, None, 1.0)
+    again = launch.run_on_ray(plan[:-1], tmp_path / "ray", lambda o: None, None, 1.0)
     assert {o.summary["sweep"] for o in again} == {"skipped"}
 
 

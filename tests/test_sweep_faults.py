@@ -17,7 +17,7 @@ import pytest
 
 from a2cm_phys.base.exitcodes import EXIT_NO_SPACE
 from a2cm_phys.commands import sweep
-from a2cm_phys.study import sweep as study_sweep
+from a2cm_phys.study.rundirs import run_state
 from a2cm_phys.training.rundir import run_lock
 
 TINY = {"updates": 4, "num_envs": 4, "batch_size": 16}
@@ -96,7 +96,7 @@ def test_a_second_sweep_leaves_the_first_ones_run_alone_and_sigterm_stops_the_fi
     assert first.returncode == 128 + signal.SIGTERM, err
     assert "interrupted (SIGTERM)" in err and "run the same command to resume" in err
     assert json.loads((run_dir / "summary.json").read_text())["status"] == "interrupted"
-    assert study_sweep.run_state(run_dir) == "partial"  # the same command resumes it
+    assert run_state(run_dir) == "partial"  # the same command resumes it
 
 
 @pytest.mark.slow
@@ -114,7 +114,7 @@ def test_sigterm_stops_a_sweep_on_ray_resumably_with_143(tmp_path):
     assert "interrupted (SIGTERM)" in err and "run the same command to resume" in err
     assert "Traceback" not in err and "SIGTERM received" not in err  # no Ray stack dump
     assert json.loads((run_dir / "summary.json").read_text())["status"] == "interrupted"
-    assert study_sweep.run_state(run_dir) == "partial"
+    assert run_state(run_dir) == "partial"
 
 
 def test_a_sweep_whose_runs_all_fail_says_so_and_names_only_what_it_wrote(tmp_path, capsys):

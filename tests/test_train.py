@@ -271,7 +271,7 @@ def test_physics_resume_restarts_games_deterministically(tmp_path: Path) -> None
 
 def test_a_resumed_run_continues_its_episode_log(tmp_path, monkeypatch):
     """Every episode of an interrupted and resumed run has a summary in the run's logs."""
-    from a2cm_phys.analysis.figures import log_files
+    from a2cm_phys.analysis.run_series import log_files
     from a2cm_phys.commands.train import main as train_main
     from a2cm_phys.record import read_run
     from a2cm_phys.training.trainer import Trainer

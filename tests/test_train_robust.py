@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from a2cm_phys.analysis.figures import load_logged_run
+from a2cm_phys.analysis.run_series import load_logged_run
 from a2cm_phys.commands.replay import main as replay_main
 from a2cm_phys.commands.train import EXIT_INTERRUPTED, EXIT_WORKER_DIED, main
 from a2cm_phys.record import read_run

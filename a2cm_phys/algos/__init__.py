@@ -14,8 +14,10 @@ from .distributions import (
     GaussianActions,
     sample_categorical,
 )
-from .learner import BATCH_KEYS, Learner, NonFiniteLoss
-from .models import ActorCritic, StackedLinear, action_distribution, make_model
+from .layers import StackedLinear
+from .learner import BATCH_KEYS, Learner
+from .losses import NonFiniteLoss
+from .models import ActorCritic, action_distribution, make_model
 from .normalize import ValueNorm
 from .returns import advantages, discounted_returns, discounted_returns_np, gae
 

@@ -61,7 +61,7 @@ if TYPE_CHECKING:
     from ..config import Train
     from .models import ActorCritic
 
-__all__ = ["BATCH_KEYS", "Learner", "NonFiniteLoss", "make_optimizer"]
+__all__ = ["BATCH_KEYS", "Learner"]
 
 BATCH_KEYS = ("obs", "actions", "rewards", "terminated", "truncated", "final_obs", "next_obs")
 """Keys :meth:`Learner.update` reads from a batch (all time-major except ``next_obs``); a

@@ -42,7 +42,6 @@ from .distributions import (
     ActionDistribution,
     CategoricalActions,
     GaussianActions,
-    sample_categorical,
 )
 from .encoding import OneHotCells
 from .layers import StackedLinear, stacked_mlp
@@ -51,7 +50,7 @@ from .snapshot import ActorSnapshot
 if TYPE_CHECKING:
     from ..config import Scenario, Train
 
-__all__ = ["ActorCritic", "OneHotCells", "StackedLinear", "make_model", "sample_categorical"]
+__all__ = ["ActorCritic", "make_model"]
 
 
 class ActorCritic(nn.Module):

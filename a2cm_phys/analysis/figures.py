@@ -18,20 +18,15 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Scenario
-from .run_series import EXPLOIT_SERIES, Run, episode_env_steps, load_logged_run, log_files
+from .run_series import EXPLOIT_SERIES, Run
 
 __all__ = [
     "COLOURS",
     "EXPLOIT_FILE",
-    "EXPLOIT_SERIES",
     "SERIES",
     "Panel",
     "Reference",
-    "Run",
     "binned",
-    "episode_env_steps",
-    "load_logged_run",
-    "log_files",
     "moving_average",
     "panels_of",
     "plot_aggregate",

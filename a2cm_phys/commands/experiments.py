@@ -38,6 +38,7 @@ from datetime import datetime
 from typing import Any
 
 from ..config import CONTROL_DEFAULTS, FLEE_DEFAULTS, ConfigError, load_train
+from ..study.launch import run_all
 from ..study.report.plan import (
     ALGOS,
     EXPERIMENTS,
@@ -50,7 +51,7 @@ from ..study.report.plan import (
     plan,
     time_cells,
 )
-from ..study.sweep import Outcome, run_all
+from ..study.results import Outcome
 from .options import Parser, check_device, int_range, run_cli, split_assignments, writable_dir
 from .sweep import parse_seeds
 

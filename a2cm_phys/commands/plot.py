@@ -28,13 +28,13 @@ from pathlib import Path
 
 from ..analysis.figures import (
     Reference,
-    load_logged_run,
     panels_of,
     plot_aggregate,
     plot_runs,
     reference_for,
     unique_labels,
 )
+from ..analysis.run_series import load_logged_run
 from .options import Parser, UsageError, int_range, run_cli, writable_dir
 
 

@@ -5,7 +5,7 @@ one after another without Ray).
 
 Parses the options into run specs and prints each run's fate and the summary table; the
 sweep itself (reuse of finished runs, the runs' locks, retries, stopping on a signal) is
-:mod:`a2cm_phys.study.sweep`.
+:mod:`a2cm_phys.study.launch`.
 """
 
 from __future__ import annotations
@@ -21,16 +21,11 @@ from ..config import (
     ConfigError,
     load_scenario,
 )
+from ..study.launch import run_all
+from ..study.results import Outcome, format_table, summarise, write_summary
+from ..study.rundirs import check_reusable
+from ..study.runspec import RunSpec
 from ..study.stopping import stop_signals
-from ..study.sweep import (
-    Outcome,
-    RunSpec,
-    check_reusable,
-    format_table,
-    run_all,
-    summarise,
-    write_summary,
-)
 from .options import (
     Parser,
     add_logdir,

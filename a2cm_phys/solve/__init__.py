@@ -1,17 +1,20 @@
 """Exact solution of the grid game by dynamic programming over the joint state.
 
-:mod:`.model` factorises one step of the game into per-pursuer tables and computes the
-Bellman backup over all joint states and joint actions with numpy; :mod:`.dp` runs value
-iteration on it (and, for evaders that might escape, finds the states from which capture
-cannot be forced); :mod:`.policy_chain` replays a fixed policy through the real rule
-(:meth:`~a2cm_phys.envs.grid.GridRules.apply`) to evaluate it exactly. The command and the
-cached, playable policy live in :mod:`a2cm_phys.oracle`.
+:mod:`.model` factorises one step of the game into per-pursuer tables
+(:mod:`.transitions`) and computes the Bellman backup over all joint states and joint
+actions with numpy (:mod:`.backup`); :mod:`.dp` runs value iteration on it (and, for
+evaders that might escape, finds the states from which capture cannot be forced);
+:mod:`.policy_chain` replays a fixed policy through the real rule
+(:meth:`~a2cm_phys.envs.grid.GridRules.apply`) to evaluate it exactly. The solutions'
+cache is :mod:`.cache`; the command, :mod:`a2cm_phys.commands.oracle`.
 
 Exploitability: :mod:`.tables` defines the policy tables over joint states both teams'
 fixed policies are given as; :mod:`.best_response` solves the evader's best response to a
-pursuer table (finite-horizon backward induction, one step by :mod:`.pursuer_step`) and
-the pursuers' best response to an evader table (the oracle against it); :mod:`.sources`
-builds tables from names (``random``, ``oracle``, ``flee``, ...) and run directories.
+pursuer table (finite-horizon backward induction, one step by :mod:`.pursuer_step` and
+:mod:`.sparse_step`) and the pursuers' best response to an evader table (the oracle
+against it); :mod:`a2cm_phys.analysis.sources` builds tables from names (``random``,
+``oracle``, ``flee``, ...) and run directories. :mod:`.worst_case` differentiates both
+teams' worst cases (exploitability descent).
 The game's value, both teams at their best: :mod:`.minimax` brackets it by the two games of
 perfect information, :mod:`.nash` computes it with mixed strategies (Shapley's recursion)
 and brackets it by an equilibrium evader's and team's exact worst cases.
@@ -27,7 +30,7 @@ from .best_response import (
     pursuers_best_response,
 )
 from .dp import DPResult, solve_dp
-from .model import GridModel, TooLargeError, UnsupportedError
+from .model import GridModel
 from .policy_chain import (
     PolicyChain,
     capture_distribution,
@@ -43,6 +46,7 @@ from .tables import (
     scripted_evader_table,
     uniform_table,
 )
+from .transitions import TooLargeError, UnsupportedError
 
 __all__ = [
     "BestResponse",

@@ -1,5 +1,6 @@
 """The Bellman backup's expectation and immediate reward over every joint state and joint
-action of a :class:`~.model.GridModel`, one slice of the first pursuer's cell at a time.
+action of a grid game's tables (:class:`~.transitions.GridTables`), one slice of the first
+pursuer's cell at a time.
 
 The full tensor's axes are ``(p_0, a_0, p_1, a_1, …, p_{N-1}, a_{N-1}, e)``. The expected
 next value is a chain of ``np.take`` calls over the model's per-agent tables, one per
@@ -11,12 +12,10 @@ never built.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:  # the model builds its backup: only its type is needed here
-    from .model import GridModel
+from .transitions import GridTables
 
 
 class SlicedBackup:
@@ -27,7 +26,7 @@ class SlicedBackup:
     when it is an array) are built on first use: loading a cached solution never needs them.
     """
 
-    def __init__(self, model: GridModel) -> None:
+    def __init__(self, model: GridTables) -> None:
         self.model = model
         self._nocoll: list[np.ndarray] | None = None
         self._reward: list[np.ndarray] | None = None

@@ -39,8 +39,8 @@ import numpy as np
 
 from ..config import Scenario
 from ..envs.grid import GridRules, meet
-from .model import MEMORY_BUDGET, TooLargeError, UnsupportedError
 from .tables import n_states, start_state, state_cells, valid_states
+from .transitions import MEMORY_BUDGET, TooLargeError, UnsupportedError
 
 CHUNK = 1 << 15
 """States per block of the recursion (bounds its temporary arrays to ~100 MB)."""

@@ -41,8 +41,8 @@ import torch
 
 from ..config import Scenario
 from .minimax import check_minimax, transitions
-from .model import MEMORY_BUDGET, TooLargeError
 from .tables import check_table, n_states, start_state, valid_states
+from .transitions import MEMORY_BUDGET, TooLargeError
 
 SWEEPS = 60
 """Shapley sweeps at most (each one step more of the game; on the 5×5 arena with three

@@ -34,7 +34,6 @@ import numpy as np
 
 from ..config import Scenario
 from ..envs.grid import GridRules
-from .model import MAX_STATES, MEMORY_BUDGET, TooLargeError, UnsupportedError, free_table
 from .sparse_step import (
     CsrPattern,
     apart_mask,
@@ -44,6 +43,7 @@ from .sparse_step import (
     swap_rows,
 )
 from .tables import check_table, n_states, state_cells, state_of_cells, valid_states
+from .transitions import MAX_STATES, MEMORY_BUDGET, TooLargeError, UnsupportedError, free_table
 
 Kind = Literal["auto", "deterministic", "product", "general"]
 

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 
 from ..config import Scenario
-from .model import pair_table
 from .tables import n_states, state_cells
+from .transitions import pair_table
 
 
 def joint_next_states(scenario: Scenario, pmove: np.ndarray) -> np.ndarray:

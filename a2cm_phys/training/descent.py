@@ -41,8 +41,8 @@ import torch
 
 from ..algos import ActorCritic
 from ..config import ConfigError, Scenario, Train
-from ..solve.model import TooLargeError, UnsupportedError
 from ..solve.tables import joint_observations, model_table, uniform_table
+from ..solve.transitions import TooLargeError, UnsupportedError
 from .seeding import descent_rng, evader_descent_rng
 
 

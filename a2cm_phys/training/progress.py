@@ -3,24 +3,22 @@
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
 
 from tqdm import tqdm
 
-if TYPE_CHECKING:
-    from .trainer import Trainer
+from .state import RunState
 
 
 class ProgressBar:
-    """A tqdm bar over updates showing episode statistics; a no-op without a trainer."""
+    """A tqdm bar over updates showing episode statistics; a no-op without a run."""
 
-    def __init__(self, trainer: Trainer | None) -> None:
-        self.trainer = trainer
+    def __init__(self, run: RunState | None) -> None:
+        self.run = run
         self.bar = None
         self._next_postfix = 0.0
 
     def __enter__(self) -> ProgressBar:
-        t = self.trainer
+        t = self.run
         if t is not None:
             self.bar = tqdm(total=t.cfg.updates, initial=t.update, unit="upd", dynamic_ncols=True)
         return self
@@ -33,7 +31,7 @@ class ProgressBar:
         now = time.perf_counter()
         if now >= self._next_postfix:  # formatting the postfix costs ~50 µs
             self._next_postfix = now + 0.5
-            t = self.trainer
+            t = self.run
             s = t.stats
             self.bar.set_postfix(
                 episodes=s.episodes,

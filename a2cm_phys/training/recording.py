@@ -2,17 +2,13 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from ..config import to_dict
 from ..record.parts import new_part, part_files
 from ..record.writer import EpisodeRecorder
-
-if TYPE_CHECKING:
-    from .trainer import Trainer
+from .state import RunState
 
 
-def open_recorder(trainer: Trainer) -> EpisodeRecorder:
+def open_recorder(run: RunState) -> EpisodeRecorder:
     """The run's MCAP recorder for this session (a new part of its log).
 
     The one call site of :mod:`a2cm_phys.record`: the recorder gets ``start(env, obs)``,
@@ -23,21 +19,21 @@ def open_recorder(trainer: Trainer) -> EpisodeRecorder:
     # cut short by a crash, or got ahead of the checkpoint), on the same clock and episode
     # ids; readers let each part supersede what earlier parts logged from its start on. The
     # games caught mid-episode get a summary without a trajectory.
-    step = trainer.update * trainer.cfg.steps_per_env
-    path, session = new_part(trainer.run_dir, trainer.update)
+    step = run.update * run.cfg.steps_per_env
+    path, session = new_part(run.run_dir, run.update)
     part = {
         "session": session,
-        "update": trainer.update,
-        "episode": trainer.stats.episodes,
+        "update": run.update,
+        "episode": run.stats.episodes,
         "step": step,
-        "after": [p.name for p in part_files(trainer.run_dir)],
+        "after": [p.name for p in part_files(run.run_dir)],
     }
     recorder = EpisodeRecorder(
         path,
-        trainer.scenario,
-        {"train": to_dict(trainer.cfg), "part": part},
-        log_every=trainer.log_every,
-        scene_every=trainer.scene_every,
+        run.scenario,
+        {"train": to_dict(run.cfg), "part": part},
+        log_every=run.log_every,
+        scene_every=run.scene_every,
     )
-    recorder.start(trainer.env, trainer.obs, step=step, episode=trainer.stats.episodes)
+    recorder.start(run.env, run.obs, step=step, episode=run.stats.episodes)
     return recorder

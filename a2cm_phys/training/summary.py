@@ -5,28 +5,26 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from .rundir import SUMMARY_NAME, write_atomic
-
-if TYPE_CHECKING:
-    from .trainer import Trainer
+from .state import RunState
 
 
-def run_summary(trainer: Trainer, status: str = "done") -> dict[str, Any]:
+def run_summary(run: RunState, status: str = "done") -> dict[str, Any]:
     """Run statistics: episodes, mean length (last 1,000), collisions, captures, speed."""
-    s, cfg = trainer.stats, trainer.cfg
-    wall = trainer.wall_time()
-    steps = trainer.update * cfg.batch_size
+    s, cfg = run.stats, run.cfg
+    wall = run.wall_time()
+    steps = run.update * cfg.batch_size
     per_episode = s.collisions / s.episodes if s.episodes else math.nan
     return {
         "status": status,
-        "run_dir": str(trainer.run_dir),
-        "scenario": trainer.scenario.name,
+        "run_dir": str(run.run_dir),
+        "scenario": run.scenario.name,
         "algo": cfg.algo,
         "seed": cfg.seed,
         "num_envs": cfg.num_envs,
-        "updates": trainer.update,
+        "updates": run.update,
         "steps": steps,
         "episodes": s.episodes,
         "mean_length_last_1000": s.recent_mean(0),
@@ -34,16 +32,14 @@ def run_summary(trainer: Trainer, status: str = "done") -> dict[str, Any]:
         **(
             {
                 "evader_mean_return_last_1000": s.recent_mean(3),
-                "opponents": opponents(trainer),
+                "opponents": opponents(run),
             }
-            if trainer.evader is not None
+            if run.evader is not None
             else {}
         ),
-        **({"descent_value": trainer.descent.last_value} if trainer.descent is not None else {}),
+        **({"descent_value": run.descent.last_value} if run.descent is not None else {}),
         **(
-            {"evader_descent_value": trainer.descent.last_evader_value}
-            if trainer.evader_descends()
-            else {}
+            {"evader_descent_value": run.descent.last_evader_value} if run.evader_descends() else {}
         ),
         "captures": s.captures,
         "capture_rate": s.captures / s.episodes if s.episodes else math.nan,
@@ -53,18 +49,18 @@ def run_summary(trainer: Trainer, status: str = "done") -> dict[str, Any]:
         "collisions_per_episode": per_episode,
         "wall_time_s": wall,
         "steps_per_s": steps / wall if wall > 0 else math.nan,
-        "last_checkpoint_update": trainer.saved_update,
+        "last_checkpoint_update": run.saved_update,
     }
 
 
-def opponents(trainer: Trainer) -> str:
+def opponents(run: RunState) -> str:
     """How the teams of a self-play run met their opponents, for the summary."""
-    cfg = trainer.cfg
-    text = "simultaneous" if trainer.pool is None else trainer.pool.describe(cfg.pool_every)
-    if trainer.descent is None:
+    cfg = run.cfg
+    text = "simultaneous" if run.pool is None else run.pool.describe(cfg.pool_every)
+    if run.descent is None:
         return text
     descent = f"exploitability descent every {cfg.descent_every} updates"
-    if trainer.evader_descends():
+    if run.evader_descends():
         return f"both teams: {descent}"
     return f"pursuers: {descent}; evader: {text}"
 

@@ -33,11 +33,12 @@ from .episode_stats import EpisodeStats
 from .opponents import LATEST, Pairing
 from .resume import resume_point
 from .rollout import StepHook, collect
-from .run_state import IDLE, LEARN, UpdateBoundary, capture, restore
+from .run_state import capture, restore
 from .seeding import policy_rng
 from .selfplay import make_descent, make_pool
-from .session import SessionClock, run_session, save_checkpoint
+from .session import run_session, save_checkpoint
 from .signals import StopSignals
+from .state import IDLE, LEARN, RunState, SessionClock, UpdateBoundary
 from .summary import run_summary
 from .teams import make_teams
 from .update import learn, players
@@ -45,8 +46,9 @@ from .update import learn, players
 __all__ = ["Trainer"]
 
 
-class Trainer:
-    """Owns one run: env, model, learner, sampling rng, episode tallies and the run directory.
+class Trainer(RunState):
+    """Owns one run: env, model, learner, sampling rng, episode tallies and the run directory
+    (its state, :class:`~.state.RunState`), and drives it update by update.
 
     Args:
         scenario: the game to train on.
@@ -80,8 +82,6 @@ class Trainer:
         self.checkpoint_seconds, self.checkpoint_every = checkpoint_seconds, checkpoint_every
         self.env = VectorEnv(scenario, cfg.num_envs, workers=cfg.workers)
         self.pursuers, self.evader = make_teams(scenario, cfg)
-        pursuers = self.pursuers
-        self.model, self.learner, self.batch = pursuers.model, pursuers.learner, pursuers.batch
         self.rng = policy_rng(cfg.seed)
         self.pool = make_pool(cfg, self.model, self.evader)  # None: simultaneous self-play
         self.pairing: Pairing = LATEST
@@ -142,7 +142,7 @@ class Trainer:
         ``"worker_died"`` or ``"no_space"``: how the session ended, and what each leaves on
         disk, is :func:`.session.run_session`'s. :attr:`stop_reason` names what stopped it
         (the file, the worker, the loss), :attr:`stop_signal` the signal."""
-        return run_session(self)
+        return run_session(self, self._one_update)
 
     def _one_update(self, on_step: StepHook | None) -> None:
         """One update: the rollout of ``batch_size`` steps, the teams' learner steps, then
@@ -163,27 +163,10 @@ class Trainer:
         self.clock.steps += self.cfg.batch_size
         self.boundary.phase = IDLE
 
-    @property
-    def finished(self) -> bool:
-        """Whether the run has taken all its updates."""
-        return self.update >= self.cfg.updates
-
     def close(self) -> None:
         """Release the environment (stops physics worker processes, if any)."""
         self.env.close()
 
-    def wall_time(self) -> float:
-        """Seconds spent training in this run, over all sessions."""
-        return self.clock.wall_time()
-
-    def session_speed(self, now: float) -> float:
-        """Environment steps per second of wall time in this session, up to ``now``."""
-        return self.clock.speed(now)
-
     def summary(self, status: str = "done") -> dict[str, Any]:
         """Run statistics (:func:`.summary.run_summary`)."""
         return run_summary(self, status)
-
-    def evader_descends(self) -> bool:
-        """Whether the learned evader learns by exploitability descent (not its rollouts)."""
-        return self.descent is not None and self.descent.evader is not None

@@ -15,7 +15,8 @@ from pathlib import Path
 from typing import Any
 
 from ...config import ConfigError, preset
-from ..sweep import RunSpec, check_reusable, execute, run_state
+from ..rundirs import check_reusable, execute, run_state
+from ..runspec import RunSpec
 
 GROUPS = ("paper", "ours", "continuous", "selfplay")
 """The groups of cells, in report order."""

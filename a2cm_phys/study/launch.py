@@ -33,31 +33,10 @@ from pathlib import Path
 from typing import Any
 
 from ..training.rundir import write_atomic
-from .results import SUMMARY_CSV, SUMMARY_JSON, Outcome, format_table, summarise, write_summary
-from .rundirs import BUSY, check_reusable, differences, execute, run_state, stored_config
+from .results import Outcome
+from .rundirs import execute
 from .runspec import RunSpec
 from .stopping import Interrupted, Received, handlers_kept, stop_signals
-
-__all__ = [
-    "BUSY",
-    "SUMMARY_CSV",
-    "SUMMARY_JSON",
-    "Interrupted",
-    "Outcome",
-    "RunSpec",
-    "check_reusable",
-    "differences",
-    "execute",
-    "format_table",
-    "run_all",
-    "run_on_ray",
-    "run_sequential",
-    "run_state",
-    "stored_config",
-    "summarise",
-    "write_summary",
-]
-
 
 
 def run_sequential(
