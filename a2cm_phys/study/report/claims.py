@@ -112,15 +112,22 @@ def paper_claims(data: Data) -> list[Claim]:
     return [c for c in found if c is not None]
 
 
+def _both(data: Data, group: str, scenario: str, field: str) -> tuple[list, list] | None:
+    """``field`` of A2CM's runs and of A2C's on ``scenario`` in ``group`` (``None`` unless
+    both have runs)."""
+    a2cm, a2c = data.runs(group, scenario, "a2cm"), data.runs(group, scenario, "a2c")
+    if not a2c or not a2cm:
+        return None
+    return [getattr(r, field) for r in a2cm], [getattr(r, field) for r in a2c]
+
+
 def _more_episodes(data: Data, group: str, mode: str, exp: int) -> Claim | None:
     """A2CM completes more episodes than A2C in experiment ``exp`` (Welch t)."""
     name, scenarios = EXPERIMENTS[exp]
-    a2c = data.runs(group, scenarios[mode], "a2c")
-    a2cm = data.runs(group, scenarios[mode], "a2cm")
-    if not a2c or not a2cm:
+    pair = _both(data, group, scenarios[mode], "episodes")
+    if pair is None:
         return None
-    x = [r.episodes for r in a2cm]
-    y = [r.episodes for r in a2c]
+    x, y = pair
     ratio = ratio_interval(x, y)
     p_more, p_less = welch_p(x, y, "greater"), welch_p(x, y, "less")
     paper = PAPER[exp]["a2cm"][0] / PAPER[exp]["a2c"][0]
@@ -157,12 +164,10 @@ def _settles_near_six(data: Data, group: str, mode: str) -> Claim | None:
 def _shorter_with_collisions(data: Data, group: str, mode: str, exp: int) -> Claim | None:
     """A2CM's late episodes are shorter than A2C's in collision experiment ``exp``."""
     name, scenarios = EXPERIMENTS[exp]
-    a2c = data.runs(group, scenarios[mode], "a2c")
-    a2cm = data.runs(group, scenarios[mode], "a2cm")
-    if not a2c or not a2cm:
+    pair = _both(data, group, scenarios[mode], "late_length")
+    if pair is None:
         return None
-    x = [r.late_length for r in a2cm]
-    y = [r.late_length for r in a2c]
+    x, y = pair
     ratio = ratio_interval(x, y)
     p_less, p_more = welch_p(x, y, "less"), welch_p(x, y, "greater")
     return Claim(
