@@ -1,7 +1,7 @@
 """Grid self-play with exploitability descent (issue 14's targets), measured exactly.
 
     python benchmarks/bench_descent.py [--seeds 0-4] [--jobs 2] [--logdir logs/bench-descent]
-        [--set train.KEY=VALUE ...] [--label NAME]
+        [--set train.KEY=VALUE] [--set ...] [--label NAME]
     python benchmarks/bench_descent.py --runs RUN_DIR [RUN_DIR ...]
 
 Trains ``grid_vs`` once per seed (``python -m a2cm_phys.train --scenario grid_vs --seed S
@@ -67,7 +67,7 @@ def train(seed: int, run_dir: Path, assignments: list[str]) -> float:
         "--no-record", "--no-progress",
         *(["--resume", str(run_dir)] if (run_dir / "checkpoint.pt").exists()
           else ["--run-dir", str(run_dir), "--preset", PRESET,
-                *(["--set", *assignments] if assignments else [])]),
+                *[w for a in assignments for w in ("--set", a)]]),
     ]  # fmt: skip
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
     return float(json.loads(summary.read_text())["wall_time_s"])
@@ -100,7 +100,9 @@ def main() -> None:
     p.add_argument("--seeds", default="0-4")
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--logdir", default="logs/bench-descent")
-    p.add_argument("--set", nargs="+", action="extend", default=[], metavar="KEY=VALUE")
+    p.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="one pair per flag"
+    )
     p.add_argument("--label", default="descent")
     p.add_argument("--runs", nargs="+", type=Path, metavar="RUN_DIR", help="measure these")
     p.add_argument("--max-steps", type=int, default=1000, help="the horizon of every exact value")

@@ -64,7 +64,7 @@ CASES = [
     ("train", ["--set", "train.value_norm_beta=1"], "value_norm_beta"),
     (
         "train",
-        ["--set", "train.constrain_collisions=true", "train.split_rewards=false"],
+        ["--set", "train.constrain_collisions=true", "--set", "train.split_rewards=false"],
         "constrain_collisions",
     ),
     ("train", ["--set", "train.nope=1"], "'nope'"),
@@ -122,6 +122,7 @@ CASES = [
     ("sweep", ["--scenarios", "grid", "--log-every", "-1"], "--log-every"),
     ("sweep", ["--scenarios", "grid", "--set", "train.device=nonsense"], "--device"),
     ("sweep", ["--scenarios", "grid", "--set", f"size={BIG}"], "'size'"),
+    ("sweep", ["--scenarios", "grid", "--live"], "--live: a sweep trains many runs"),
     # experiments
     ("experiments", ["--modes", "water"], "--modes"),
     ("experiments", ["--seeds", "1,1"], "--seeds"),

@@ -31,13 +31,13 @@ TINY = [
 
 
 def test_report_end_to_end_on_tiny_budgets(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     out, logdir = tmp_path / "docs", tmp_path / "runs"
     argv = [*TINY, "--logdir", str(logdir), "--out", str(out)]
     assert experiments.main([*argv, "--dry-run"]) == 0
     dry = capsys.readouterr().out
-    assert "20 runs" in dry and "paper/grid_collision-a2cm-s0: new" in dry
+    assert "20 runs" in dry and "paper/grid_collision-a2cm-paper-s0: new" in dry
     assert re.search(r"continuous: 6 runs \(6 new.*wall", dry) and "estimated total" in dry
     assert not (out / "RESULTS.md").exists()
 
@@ -59,7 +59,7 @@ def test_report_end_to_end_on_tiny_budgets(
         assert claim in claims, claim
     assert re.search(r"\*\*(holds|does not hold|inconclusive)\*\* \| Welch t", claims)
     assert "truncated to 5 steps" in claims  # --exploit-max-steps is said
-    assert "[s0](../runs/paper/grid-a2cm-s0)" in text  # rows link their runs
+    assert "[s0](../runs/paper/grid-a2cm-paper-s0)" in text  # rows link their runs
     assert "2.939 (optimum)" in text and "82,119" in text
     assert "Cross-play" in text and "evader: flee" in text
     # exact bounds from the minimax solver, truncated at the same 5 steps: [3, 5]
@@ -72,11 +72,19 @@ def test_report_end_to_end_on_tiny_budgets(
     assert (out / "figures" / "paper_grid_lengths.png").exists()
     data = json.loads((out / "results.json").read_text())
     assert len(data["runs"]) == 20 and data["claims"]
-    assert (logdir / "paper" / "grid-a2c-s0" / "report_eval.json").exists()
+    assert (logdir / "paper" / "grid-a2c-paper-s0" / "report_eval.json").exists()
 
-    # again: every run is skipped, every measurement comes from the caches
+    # again: every run is skipped, every measurement comes from the caches; a run named
+    # the old way (before the preset was part of the name) is found by its configuration
+    (logdir / "paper" / "grid-a2cm-paper-s0").rename(logdir / "paper" / "grid-a2cm-s0")
+    capsys.readouterr()
+    monkeypatch.setenv("A2CM_PROGRESS_SECONDS", "1e-6")  # no grace: every step reports
     assert experiments.main(argv) == 0
-    assert "skipped" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "paper/grid-a2cm-s0: skipped" in err and ": ran\n" not in err
+    assert "runs: started (20 runs)" in err and "runs: done, 20/20 runs" in err  # progress
+    assert not (logdir / "paper" / "grid-a2cm-paper-s0").exists()
+    assert "[s0](../runs/paper/grid-a2cm-s0)" in (out / "RESULTS.md").read_text()
 
     # a run that is missing is listed, not fatal
     (logdir / "ours" / "grid-a2c-s0" / "summary.json").unlink()
@@ -95,6 +103,11 @@ def test_report_end_to_end_on_tiny_budgets(
         (["--modes", "water"], ["--modes"]),
         (["--set", "size=3"], ["--set", "train.KEY"]),
         (["--cont-set", "train.nope=1", "--dry-run"], ["nope"]),
+        (
+            ["--cont-set", "max_steps=40", "train.lr=0.1"],
+            ["--cont-set max_steps=40 --cont-set train.lr=0.1"],
+        ),
+        (["--set", "train.lr=0.1", "train.gamma=0.9"], ["--set train.lr=0.1 --set train.gamma"]),
         (["--exploit-max-steps", "0"], ["--exploit-max-steps"]),
     ],
 )

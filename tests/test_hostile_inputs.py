@@ -102,11 +102,11 @@ def test_a_run_plays_where_its_layout_fits_and_nowhere_else(
 ) -> None:
     """Other arenas (xy inputs are fractions of the arena), evaders and rewards, and more
     moves than the run's (it plays a subset), are the run's layout: accepted as before."""
-    for extra in (["--set", "size=6", "evader=flee"], ["--set", "actions=5"]):
-        argv = [str(grid_run), "--scenario", "grid", *extra, "--episodes", "8"]
+    for extra in (["--set", "size=6", "--set", "evader=flee"], ["--set", "actions=5"]):
+        argv = [str(grid_run), "--scenario", "grid", *extra, "--episodes", "8", "--no-progress"]
         assert _main("evaluate")([*argv, "--reference", "none", "--json"]) == 0
     assert capsys.readouterr().err == ""
-    argv = [str(grid_run), "--scenario", "grid", "--set", "size=6", "pursuers=4"]
+    argv = [str(grid_run), "--scenario", "grid", "--set", "size=6", "--set", "pursuers=4"]
     assert _main("evaluate")([*argv, "--episodes", "8"]) == 2
     _one_error_line(capsys, "pursuers = 3, but the scenario 'grid' has pursuers = 4")
 
@@ -129,7 +129,7 @@ def test_networks_too_large_to_allocate_are_refused_before_anything_is_built(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.chdir(tmp_path)
-    argv = ["--scenario", "grid", "--set", "train.hidden=16384", "train.layers=64"]
+    argv = ["--scenario", "grid", "--set", "train.hidden=16384", "--set", "train.layers=64"]
     assert _main("train")([*argv, "--no-progress", "--logdir", "logs"]) == 2
     _one_error_line(capsys, "keys 'hidden', 'layers'", f"{MAX_WEIGHTS:,}")
     assert not any(tmp_path.iterdir())

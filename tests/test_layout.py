@@ -13,10 +13,11 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "a2cm_phys"
 
-COMMANDS = ("train", "evaluate", "replay", "plot", "oracle", "sweep", "experiments")
+COMMANDS = ("train", "evaluate", "replay", "plot", "oracle", "export", "sweep", "experiments")
 
 LAYERS = (
     ("base", ("base",)),
+    ("deploy", ("deploy",)),
     ("config", ("config",)),
     ("envs", ("envs",)),
     ("algos", ("algos",)),

@@ -21,7 +21,14 @@ from a2cm_phys.training.trainer import Trainer
 
 SMALL = {"num_envs": 4, "batch_size": 32}
 VS = ("--scenario", "grid_vs", "--num-envs", "4", "--batch-size", "32", "--seed", "5")
-POOL = ("--set", "train.pool_every=2", "train.pool_size=2", "train.pool_latest=0.3")
+POOL = (
+    "--set",
+    "train.pool_every=2",
+    "--set",
+    "train.pool_size=2",
+    "--set",
+    "train.pool_latest=0.3",
+)
 
 
 def _pool(size: int = 3, latest: float = 0.5, seed: int = 0) -> OpponentPool:

@@ -145,7 +145,7 @@ def test_runs_grouped_by_label_are_plotted_as_seeds_against_env_steps(tmp_path: 
     group = [f"--group=A2C={tmp_path / 'a2c0'},{tmp_path / 'a2c1'}",
              f"--group=A2CM={tmp_path / 'a2cm0'},{tmp_path / 'a2cm1'}"]  # fmt: skip
     assert main([*group, "--out", str(out)]) == 0
-    for name in ("lengths_mean.png", "returns_mean.png"):
+    for name in ("lengths_mean.png", "returns_mean.png", "collisions_mean.png"):
         with Image.open(out / name) as im:
             assert im.size[0] > 400 and len(np.unique(np.asarray(im.convert("L")))) > 10
     edges = np.array([0.0, 240.0, 480.0])
@@ -168,7 +168,7 @@ def test_exploitability_figure_shows_the_cached_game_value(
 ) -> None:
     from matplotlib.figure import Figure
 
-    from a2cm_phys.analysis.figures import _draw_game_values
+    from a2cm_phys.analysis.exploit_figure import draw_game_values
     from a2cm_phys.config import load_scenario
     from a2cm_phys.solve.cache import cached_value, load_or_solve_value
 
@@ -188,7 +188,7 @@ def test_exploitability_figure_shows_the_cached_game_value(
     assert main([str(tmp_path / "sp"), "--out", str(tmp_path / "after")]) == 0
     assert "not cached" not in capsys.readouterr().out
     ax = Figure().add_subplot()
-    _draw_game_values(ax, [sc, sc])  # one band a game
+    draw_game_values(ax, [sc, sc])  # one band a game
     (band,) = ax.patches
     low, high = band.get_path().get_extents(band.get_patch_transform()).intervaly
     assert (low, high) == pytest.approx((value.lower, value.upper))

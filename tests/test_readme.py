@@ -74,6 +74,11 @@ def shorten(argv: list[str], run_dir: Path, tmp: Path) -> list[str]:
         rest += ["--logdir", str(tmp / "report-runs"), "--out", str(tmp / "report")]
     elif name == "replay" and "--export-foxglove" in rest and "--out" not in rest:
         rest += ["--episode", "1", "--out", str(tmp / "episode.mcap")]
+    if "--live" in rest:  # any free port: the test may run beside a user's live view
+        rest.insert(rest.index("--live") + 1, "0")
+    if "--serve" in rest:  # a free port, and no client to wait for
+        rest[rest.index("--serve") + 1 : rest.index("--serve") + 1] = ["0", "--wait", "0.1"]
+        rest[rest.index("--speed") + 1] = "1000"
     return [name, *rest]
 
 
@@ -82,7 +87,16 @@ COMMANDS = readme_commands(README.read_text(encoding="utf-8"))
 
 def test_the_readme_shows_every_command_and_its_main_job():
     names = {argv[0] for argv in COMMANDS}
-    assert names == {"train", "evaluate", "replay", "plot", "oracle", "sweep", "experiments"}
+    assert names == {
+        "train",
+        "evaluate",
+        "replay",
+        "plot",
+        "oracle",
+        "export",
+        "sweep",
+        "experiments",
+    }
     assert ["train", "--scenario", "grid_collision"] in COMMANDS
     assert ["replay", "RUN", "--verify"] in COMMANDS
 

@@ -1,4 +1,5 @@
-"""The MCAP run log: round trip against the env, schemas, Foxglove scenes, crash safety."""
+"""The MCAP run log: round trip against the env, schemas, Foxglove scenes (the Foxglove SDK's
+protobuf messages, decoded with ``mcap-protobuf-support``), crash safety."""
 
 from __future__ import annotations
 
@@ -11,26 +12,25 @@ import textwrap
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import jsonschema
 import numpy as np
 import pytest
+from foxglove.messages import SceneUpdate
 from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
 
 from a2cm_phys.config import Scenario, load_scenario, to_dict
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.record import EpisodeRecorder, LogError, RunLog, read_run
 from a2cm_phys.record.schemas import (
-    SCENE_SCHEMA,
     SCENE_TOPIC_PREFIX,
     SCHEMAS,
     SUMMARY_TOPIC,
     TRAJECTORY_TOPIC,
     UPDATE_TOPIC,
 )
-
-FOXGLOVE_SCENE = Path(__file__).resolve().parent / "data/foxglove/SceneUpdate.json"
-"""Foxglove's own schema, vendored with its MIT licence (see ``data/foxglove/README.md``)."""
 
 
 def validator(schema: dict) -> jsonschema.Validator:
@@ -195,31 +195,45 @@ def test_every_message_matches_its_schema(grid_log: tuple[Path, dict]) -> None:
     assert any(t.startswith(SCENE_TOPIC_PREFIX) for t in seen)
 
 
-def check_messages(path: Path) -> dict[str, list[tuple[int, dict]]]:
-    """Validate every message of a log against its stored schema (and scenes against
-    Foxglove's own), check each channel's times never go back; return each topic's
-    ``(log_time, message)`` list."""
-    assert FOXGLOVE_SCENE.exists(), f"Foxglove's schema is expected at {FOXGLOVE_SCENE}"
-    official = validator(json.loads(FOXGLOVE_SCENE.read_text()))
+def decode_scene(schema: Any, channel: Any, data: bytes) -> Any:
+    """A scene message decoded by ``mcap-protobuf-support`` from the schema it was stored
+    with, after checking the channel is as Foxglove expects: the SDK's own
+    ``foxglove.SceneUpdate`` schema (its protobuf ``FileDescriptorSet``), protobuf messages."""
+    assert schema.name == "foxglove.SceneUpdate" and schema.encoding == "protobuf"
+    assert channel.message_encoding == "protobuf"
+    assert schema.data == SceneUpdate.get_schema().data
+    decoder = DecoderFactory().decoder_for(channel.message_encoding, schema)
+    assert decoder is not None
+    return decoder(data)
+
+
+def stamp_ns(entity: Any) -> int:
+    """A decoded scene entity's timestamp in nanoseconds."""
+    return entity.timestamp.seconds * 1_000_000_000 + entity.timestamp.nanos
+
+
+def check_messages(path: Path) -> dict[str, list[tuple[int, Any]]]:
+    """Validate every JSON message of a log against its stored schema (the package's own),
+    decode every scene through ``mcap`` and ``mcap-protobuf-support`` with the schema it was
+    stored with, check each channel's times never go back; return each topic's
+    ``(log_time, message)`` list (a dict, or a decoded ``foxglove.SceneUpdate``)."""
     stored: dict[int, jsonschema.Validator] = {}
-    seen: dict[str, list[tuple[int, dict]]] = {}
+    seen: dict[str, list[tuple[int, Any]]] = {}
     with open(path, "rb") as fh:
         for schema, channel, message in make_reader(fh).iter_messages(log_time_order=False):
+            if channel.topic.startswith(SCENE_TOPIC_PREFIX):
+                decoded = decode_scene(schema, channel, message.data)
+                ids = [e.id for e in decoded.entities]
+                assert {"arena", "pursuer_0", "evader", "trails", "contacts"} <= set(ids)
+                assert all(stamp_ns(e) == message.log_time for e in decoded.entities)
+                seen.setdefault(channel.topic, []).append((message.log_time, decoded))
+                continue
             doc = json.loads(message.data)
             assert channel.message_encoding == "json" and schema.encoding == "jsonschema"
             if schema.id not in stored:
                 stored[schema.id] = validator(json.loads(schema.data))
-                assert json.loads(schema.data) == (
-                    SCENE_SCHEMA
-                    if channel.topic.startswith(SCENE_TOPIC_PREFIX)
-                    else SCHEMAS[channel.topic]
-                )
+                assert json.loads(schema.data) == SCHEMAS[channel.topic]
             stored[schema.id].validate(doc)
-            if channel.topic.startswith(SCENE_TOPIC_PREFIX):
-                assert schema.name == "foxglove.SceneUpdate"
-                official.validate(doc)
-                ids = {e["id"] for e in doc["entities"]}
-                assert {"arena", "pursuer_0", "evader"} <= ids
             seen.setdefault(channel.topic, []).append((message.log_time, doc))
     for topic, messages in seen.items():  # each channel's log times never go back
         times = [t for t, _ in messages]

@@ -10,10 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
-from test_record import check_messages, main_verify, make_log
+from test_record import check_messages, main_verify, make_log, stamp_ns
 from test_replay import rewrite
 
-from a2cm_phys.analysis.episodes import episode_frames, episode_text
+from a2cm_phys.analysis.episodes import episode_text
+from a2cm_phys.analysis.pictures import episode_picture, frame_title
 from a2cm_phys.commands.replay import main
 from a2cm_phys.config import Scenario
 from a2cm_phys.record import LogError, read_run
@@ -106,13 +107,12 @@ def test_verify_catches_a_tampered_command(
 
 def test_scenes_and_clock_run_at_the_control_rate(cont_log: tuple[Path, dict]) -> None:
     path, expected = cont_log
-    seen = check_messages(path)  # every scene is valid against Foxglove's own schema too
+    seen = check_messages(path)  # every scene decodes with the Foxglove SDK's own schema
     scenes = [m for t, ms in seen.items() if t.startswith(SCENE_TOPIC_PREFIX) for m in ms]
     drawn = [e for j, (e, _) in enumerate(expected["finished"]) if j % 2 == 0]
     assert len(scenes) == sum(e.length + 1 for e in drawn)
-    for log_time, doc in scenes:
-        stamp = doc["entities"][0]["timestamp"]
-        assert stamp["sec"] * 1_000_000_000 + stamp["nsec"] == log_time
+    for log_time, scene in scenes:
+        assert stamp_ns(scene.entities[0]) == log_time
         assert log_time % DT_NS == 0  # a control step, not a whole second
     e = expected["finished"][0][0]  # drawn first in its game: its frames come first there
     frames = [t for t, _ in seen[f"{SCENE_TOPIC_PREFIX}{e.env}"][: e.length + 1]]
@@ -151,12 +151,13 @@ def test_gif_frames_draw_the_paths_as_trails(tmp_path: Path) -> None:
     log = read_run(tmp_path)
     traj = log.trajectory(0)
     assert traj.length == 40  # no capture: the pursuers drift towards the top-right corner
-    frames = episode_frames(log.scenario, traj, max_frames=5)
-    assert len(frames) == 5
+    picture = episode_picture(log.scenario, traj, max_frames=5)
+    assert picture.steps == [0, 10, 20, 30, 40]
     trail_pixels = []  # pixels that differ from the same picture drawn without trails
-    for k, frame in zip((0, 10, 20, 30, 40), frames, strict=True):
-        title = f"episode 0  step {k}/40  t={k * 0.1:.1f} s"
-        bare = render_rgb(log.scenario, traj.positions[k], traj.velocities[k], title, 240)
+    for k, frame, caption in zip(picture.steps, picture.frames, picture.captions, strict=True):
+        title = frame_title(log.scenario, traj, k, stride=10)
+        bare = render_rgb(log.scenario, traj.positions[k], traj.velocities[k], title,
+                          trail=traj.positions[:0], caption=caption)  # fmt: skip
         trail_pixels.append(int((frame != bare).any(-1).sum()))
     assert trail_pixels[0] == 0 and trail_pixels[-1] > 300
     assert trail_pixels == sorted(set(trail_pixels))  # the trails grow with the path

@@ -71,9 +71,19 @@ def test_one_run_trains_both_teams(tmp_path: Path) -> None:
     "opponents",
     [
         (),
-        ("--set", "train.pool_every=2", "train.pool_size=2"),
-        ("--set", "train.descent_every=3", "train.descent_teams=both", "size=3", "pursuers=2",
-         "max_steps=50"),
+        ("--set", "train.pool_every=2", "--set", "train.pool_size=2"),
+        (
+            "--set",
+            "train.descent_every=3",
+            "--set",
+            "train.descent_teams=both",
+            "--set",
+            "size=3",
+            "--set",
+            "pursuers=2",
+            "--set",
+            "max_steps=50",
+        ),
     ],
     ids=["simultaneous", "pool", "descent"],
 )

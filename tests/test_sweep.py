@@ -211,3 +211,27 @@ def test_an_interrupt_stops_the_sweep_instead_of_retrying(tmp_path, monkeypatch,
     assert _sweep(tmp_path, "--seeds", "0-1") == 130
     assert calls == [0, 1, 2]  # neither retried nor the next run started
     assert "run the same command to resume" in capsys.readouterr().err
+
+
+def test_a_sweep_without_a_terminal_says_which_run_goes_on_every_interval(
+    tmp_path, monkeypatch, capsys
+):
+    import time
+
+    from a2cm_phys.training.trainer import Trainer
+
+    original = Trainer._one_update
+
+    def slow(self, on_step):
+        time.sleep(0.15)
+        original(self, on_step)
+
+    monkeypatch.setattr(Trainer, "_one_update", slow)
+    monkeypatch.setenv("A2CM_PROGRESS_SECONDS", "0.2")
+    assert _sweep(tmp_path) == 0
+    captured = capsys.readouterr()
+    assert "grid-a2cm-s0: ran" in captured.out  # the run's fate: the result, on stdout
+    lines = captured.err.splitlines()
+    assert lines[0] == "sweep: started (1 runs)" and lines[-1].startswith("sweep: done, 1/1 runs")
+    assert any(line.startswith("sweep: 0/1 runs (0%)") and "now grid-a2cm-s0" in line
+               for line in lines[1:-1]), lines  # fmt: skip

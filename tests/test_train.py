@@ -59,7 +59,12 @@ def _assert_same_run(a: Path, b: Path) -> None:
 # one with an uninterrupted run needs a constant schedule (a resume at the same length
 # is exact either way).
 GRID = ("--scenario", "grid", "--num-envs", "4", "--batch-size", "32", "--seed", "3")
-CONSTANT_SCHEDULES = ("--set", "train.lr_schedule=constant", "train.entropy_schedule=constant")
+CONSTANT_SCHEDULES = (
+    "--set",
+    "train.lr_schedule=constant",
+    "--set",
+    "train.entropy_schedule=constant",
+)
 
 
 def test_resume_reproduces_uninterrupted_run(tmp_path: Path) -> None:

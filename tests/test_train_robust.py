@@ -57,7 +57,7 @@ def test_a_log_ahead_of_its_checkpoint_counts_each_episode_once(tmp_path, capsys
     """Killed after the log got ahead of the last checkpoint, then resumed: plot and replay
     see every episode once, and as many as an uninterrupted run has."""
     whole, run_dir = tmp_path / "whole", tmp_path / "run"
-    constant = ["--set", "train.lr_schedule=constant", "train.entropy_schedule=constant"]
+    constant = ["--set", "train.lr_schedule=constant", "--set", "train.entropy_schedule=constant"]
     assert main([*GRID, *constant, "--updates", "8", "--run-dir", str(whole)]) == 0
     assert main([*GRID, *constant, "--updates", "5", "--run-dir", str(run_dir)]) == 0
     saved = tmp_path / "at5.pt"

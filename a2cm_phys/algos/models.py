@@ -22,6 +22,14 @@ the :mod:`~a2cm_phys.algos.distributions` object's business: logits of a categor
 ``log_std`` per agent (continuous control). A critic may predict several values per state
 (``n_values``): one per reward component, when the learner splits the team reward.
 
+**Sensing** (SPEC §6b, ``Scenario.sensing``): the team's input is the vector of
+:func:`~a2cm_phys.envs.sensing.team_observation` (the global state, then each agent's own
+masked observation). Each actor then reads only its own agent's observation (decentralised
+execution: what the agent sensed, or with ``share`` what its team did). A2CM's one shared
+critic reads the global state (centralised training: the critic is not needed to act);
+A2C's critic i reads agent i's own observation, as its actor does. Without sensing every
+network reads the global state, as before, weight for weight.
+
 For rollouts :meth:`ActorCritic.act` computes the actor outputs from a numpy snapshot of
 the actor weights (:class:`~a2cm_phys.algos.snapshot.ActorSnapshot`, several times faster
 than torch for 1–64 rows), refreshed automatically whenever the torch parameters change in
@@ -30,14 +38,17 @@ place (optimiser step, ``load_state_dict``).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import distributions as D
 from torch import nn
 
 from ..envs.core import REWARD_PARTS
+from ..envs.sensing import team_dim
 from .distributions import (
     ActionDistribution,
     CategoricalActions,
@@ -50,7 +61,42 @@ from .snapshot import ActorSnapshot
 if TYPE_CHECKING:
     from ..config import Scenario, Train
 
-__all__ = ["ActorCritic", "make_model"]
+__all__ = ["ActorCritic", "SensedInputs", "make_model"]
+
+
+@dataclass(frozen=True)
+class SensedInputs:
+    """Where a team's networks read a sensing scenario's team vector (SPEC §6b): the global
+    state's ``state_dim`` numbers first, then one ``obs_dim`` observation per agent of the
+    game; this team's agents are those from slot ``first`` on (pursuers 0, an evader N)."""
+
+    state_dim: int
+    obs_dim: int
+    first: int = 0
+
+    def agents(self, x, n: int):
+        """The ``n`` agents' observations ``(..., n, obs_dim)`` of team vectors ``(..., d)``."""
+        start = self.state_dim + self.first * self.obs_dim
+        if x.shape[-1] < start + n * self.obs_dim:
+            raise ValueError(
+                f"observations of length {x.shape[-1]}: a sensing team reads team vectors"
+                f" (the state, then every agent's observation; VectorEnv.obs)"
+            )
+        return x[..., start : start + n * self.obs_dim].reshape(*x.shape[:-1], n, self.obs_dim)
+
+
+def _view(sensed: SensedInputs | None, obs, n: int, state: bool = False):
+    """What a team's networks read of ``obs``, and whether one row per agent: the whole
+    vector (sensing off), the global state (``state``: A2CM's critic), or each agent's own."""
+    if sensed is None:
+        return obs, False
+    if state:
+        return obs[..., : sensed.state_dim], False
+    return sensed.agents(obs, n), True
+
+
+def _features(encoding: OneHotCells | None, length: int) -> int:
+    return length if encoding is None else encoding.features(length)
 
 
 class ActorCritic(nn.Module):
@@ -67,6 +113,7 @@ class ActorCritic(nn.Module):
         generator: optional torch generator for a reproducible initialisation.
         layers: hidden layers of every actor and critic (the paper's: 1).
         encoding: the networks' input: the observation itself, or :class:`OneHotCells`.
+        sensed: with sensing, where the agents' observations and the state lie in the input.
     """
 
     def __init__(
@@ -82,6 +129,7 @@ class ActorCritic(nn.Module):
         generator: torch.Generator | None = None,
         layers: int = 1,
         encoding: OneHotCells | None = None,
+        sensed: SensedInputs | None = None,
     ) -> None:
         super().__init__()
         if layers < 1:
@@ -90,15 +138,17 @@ class ActorCritic(nn.Module):
         self.dist = dist
         self.obs_dim, self.n_agents, self.hidden = obs_dim, n_agents, hidden
         self.shared_critic, self.n_values = shared_critic, n_values
-        self.encoding = encoding
-        inputs = obs_dim if encoding is None else encoding.features(obs_dim)
+        self.encoding, self.sensed = encoding, sensed
         c = critics(n_agents, shared_critic)
+        inputs = critic_inputs = _features(encoding, obs_dim if sensed is None else sensed.obs_dim)
+        if sensed is not None and shared_critic:
+            critic_inputs = _features(encoding, sensed.state_dim)
         # The creation order is the draw order of ``generator``: the paper's two layers of
         # the actors, then of the critics; layers beyond the first last, so that one layer
         # draws the paper's weights.
         self.actor_hidden = StackedLinear(n_agents, inputs, hidden, generator)
         self.actor_out = StackedLinear(n_agents, hidden, dist.n_outputs, generator)
-        self.critic_hidden = StackedLinear(c, inputs, hidden, generator)
+        self.critic_hidden = StackedLinear(c, critic_inputs, hidden, generator)
         self.critic_out = StackedLinear(c, hidden, n_values, generator)
         self.actor_deep = nn.ModuleList(
             StackedLinear(n_agents, hidden, hidden, generator) for _ in range(layers - 1)
@@ -134,7 +184,8 @@ class ActorCritic(nn.Module):
 
     def actor_outputs(self, obs: torch.Tensor) -> torch.Tensor:
         """Actor outputs ``(..., N, n_outputs)`` (logits or means) for ``(..., obs_dim)``."""
-        return stacked_mlp(self.actor_hidden, self.actor_deep, self.actor_out, self._input(obs))
+        x, own = _view(self.sensed, obs, self.n_agents)
+        return _mlp(self.actor_hidden, self.actor_deep, self.actor_out, self._input(x), own)
 
     def distribution(self, obs: torch.Tensor) -> D.Distribution:
         """The policy of every agent at ``obs``: a distribution of batch shape ``(..., N)``."""
@@ -142,8 +193,8 @@ class ActorCritic(nn.Module):
 
     def value(self, obs: torch.Tensor) -> torch.Tensor:
         """Critic outputs ``(..., C)``, or ``(..., C, n_values)`` when ``n_values > 1``."""
-        x = self._input(obs)
-        out = stacked_mlp(self.critic_hidden, self.critic_deep, self.critic_out, x)
+        x, own = _view(self.sensed, obs, self.n_agents, state=self.shared_critic)
+        out = _mlp(self.critic_hidden, self.critic_deep, self.critic_out, self._input(x), own)
         return out.squeeze(-1) if self.n_values == 1 else out
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -171,7 +222,7 @@ class ActorCritic(nn.Module):
 
     def outputs_np(self, obs: np.ndarray) -> np.ndarray:
         """Actor outputs as numpy ``(B, N, n_outputs)`` (``(N, n_outputs)`` for 1-D ``obs``)."""
-        x = np.asarray(obs, dtype=np.float32)
+        x = _view(self.sensed, np.asarray(obs, dtype=np.float32), self.n_agents)[0]
         if self.encoding is not None:
             x = self.encoding.numpy(x)
         return self._numpy_actors.outputs(x)
@@ -195,7 +246,19 @@ class ActorCritic(nn.Module):
         return out
 
     def _snapshot(self) -> ActorSnapshot:
-        return ActorSnapshot(self.actor_hidden, self.actor_out, self.actor_deep, self.log_std)
+        parts = (self.actor_hidden, self.actor_out, self.actor_deep, self.log_std)
+        return ActorSnapshot(*parts, per_agent=self.sensed is not None)
+
+
+def _mlp(first: StackedLinear, deep, last: StackedLinear, x: torch.Tensor, own: bool):
+    """``n`` MLPs on one shared input (:func:`stacked_mlp`), or with ``own`` each on its own
+    input row: ``(..., n, in) → (..., n, out)``."""
+    if not own:
+        return stacked_mlp(first, deep, last, x)
+    h = F.relu(first(x))
+    for layer in deep:
+        h = F.relu(layer(h))
+    return last(h)
 
 
 def critics(n_agents: int, shared_critic: bool) -> int:
@@ -227,13 +290,22 @@ def make_model(
     team of one, such as a learned evader, passes its own). The initial weights come from
     ``generator`` if given, otherwise from a torch generator seeded with ``train_cfg.seed``
     (independent of the global torch RNG). With ``split_rewards`` each critic predicts one
-    value per reward component (:data:`~a2cm_phys.envs.core.REWARD_PARTS`).
+    value per reward component (:data:`~a2cm_phys.envs.core.REWARD_PARTS`). With sensing the
+    input is the team vector (:func:`~a2cm_phys.envs.sensing.team_dim`), and a team of one
+    (``n_agents = 1``) in a scenario with a learned evader is that evader: it reads its own
+    (last) slot.
     """
     if generator is None:
         generator = torch.Generator().manual_seed(train_cfg.seed)
+    agents = scenario.pursuers if n_agents is None else n_agents
+    sensed = None
+    if scenario.sensing.on:
+        evader = n_agents == 1 and scenario.evader == "learned"  # the evader's slot is last
+        first = scenario.pursuers if evader else 0
+        sensed = SensedInputs(scenario.state_dim, scenario.obs_dim, first)
     model = ActorCritic(
-        scenario.obs_dim,
-        scenario.pursuers if n_agents is None else n_agents,
+        team_dim(scenario),
+        agents,
         action_distribution(scenario),
         train_cfg.hidden,
         shared_critic=train_cfg.algo == "a2cm" if shared_critic is None else shared_critic,
@@ -242,5 +314,6 @@ def make_model(
         generator=generator,
         layers=train_cfg.layers,
         encoding=OneHotCells(scenario.size) if train_cfg.encoding == "onehot" else None,
+        sensed=sensed,
     )
     return model.to(train_cfg.device)

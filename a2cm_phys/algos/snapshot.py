@@ -26,6 +26,8 @@ class ActorSnapshot:
         last: their output layer.
         deep: their hidden layers beyond the first.
         log_std: the Gaussian actors' ``log_std``, or ``None``.
+        per_agent: whether each actor reads an input of its own (``(..., N, in)``, sensing
+            scenarios) rather than one shared input ``(..., in)``.
     """
 
     def __init__(
@@ -34,7 +36,9 @@ class ActorSnapshot:
         last: StackedLinear,
         deep: Sequence[StackedLinear],
         log_std: nn.Parameter | None,
+        per_agent: bool = False,
     ) -> None:
+        self.per_agent = per_agent
         self.n_agents, self.hidden, self.n_outputs = first.n, first.out_features, last.out_features
         self._deep = tuple(deep)
         self._log_std = log_std
@@ -68,8 +72,13 @@ class ActorSnapshot:
         w2 = np.zeros((n * h, n * o), dtype=np.float32)
         for i in range(n):
             w2[i * h : (i + 1) * h, i * o : (i + 1) * o] = t_w2[i].T
+        first = (
+            np.ascontiguousarray(t_w1.transpose(0, 2, 1))  # (N, in, H): one matmul per agent
+            if self.per_agent
+            else np.ascontiguousarray(t_w1.reshape(n * h, d).T)
+        )
         self._arrays = (
-            np.ascontiguousarray(t_w1.reshape(n * h, d).T),
+            first,
             t_b1.reshape(n * h).copy(),
             w2,
             t_b2.reshape(n * o).copy(),
@@ -78,12 +87,18 @@ class ActorSnapshot:
         self._key = self._versions()
 
     def outputs(self, x: np.ndarray) -> np.ndarray:
-        """Actor outputs ``(..., N, n_outputs)`` for float32 network inputs ``(..., in)``."""
+        """Actor outputs ``(..., N, n_outputs)`` for float32 network inputs ``(..., in)``, or
+        ``(..., N, in)`` (one row per actor) when ``per_agent``."""
         if self._arrays is None or self._key != self._versions():
             self.refresh()
         assert self._arrays is not None
         w1, b1, w2, b2, deep = self._arrays
-        h = x @ w1
+        if self.per_agent:
+            lead = x.shape[:-2]
+            rows = np.moveaxis(x.reshape(-1, self.n_agents, x.shape[-1]), 1, 0)  # (N, B, in)
+            h = np.moveaxis(np.matmul(rows, w1), 0, 1).reshape(*lead, self.n_agents * self.hidden)
+        else:
+            h = x @ w1
         h += b1
         np.maximum(h, 0.0, out=h)
         if deep:  # agent by agent: (N, B, H) through each agent's own weights

@@ -1,6 +1,6 @@
 """A run's log for people (the ``replay`` command prints it): the summary table over training
 (:func:`summary_table`), the header (:func:`describe`), an episode as text
-(:func:`episode_text`) or frames (:func:`episode_frames`, :func:`save_picture`), Foxglove
+(:func:`episode_text`; drawn, in :mod:`.pictures`), Foxglove
 scenes of chosen episodes (:func:`export_foxglove`), and the run's invariant read with its
 checkpoints and summary (:func:`integrity_problems`)."""
 
@@ -25,6 +25,15 @@ EXPORT_TOPIC = "/scene"
 """Topic of ``--export-foxglove`` files."""
 
 
+TABLE_NOTES = (
+    "simulated time: each game's own clock (all games step together; not the wall time);",
+    "  an episode is counted in the part of the run it ends in.",
+    "env steps: the steps of all games; time limit: episodes that reached max_steps uncaught;",
+    "collisions: pursuer-pursuer contacts; return: the team's raw reward summed per episode.",
+)
+"""What :func:`summary_table`'s columns mean, printed under it."""
+
+
 class ReplayError(UserError):
     """A request the log cannot satisfy (e.g. an episode it does not hold)."""
 
@@ -33,7 +42,9 @@ class ReplayError(UserError):
 
 
 def summary_table(log: RunLog, parts: int = 10) -> str:
-    """A markdown table of the run by ``parts`` equal spans of the log clock."""
+    """A markdown table of the run by ``parts`` equal spans of its simulated time (each
+    game's clock: the games step in lockstep), an episode counted in the span it ends in;
+    a line under it says so."""
     ep = log.episodes
     if not len(ep["episode"]):
         return "(no finished episodes)"
@@ -41,8 +52,8 @@ def summary_table(log: RunLog, parts: int = 10) -> str:
     edges = np.linspace(0.0, end, parts + 1)
     which = np.clip(np.searchsorted(edges, ep["t1"], side="left") - 1, 0, parts - 1)
     lines = [
-        "| part | run time (s) | episodes | env steps | captured | truncated | collisions "
-        "| coll./ep. | mean length | mean return |",
+        "| part of the run | simulated time (s) | episodes | env steps | captured "
+        "| time limit | collisions | collisions/episode | mean length (steps) | mean return |",
         "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     rows = [(f"{100 * k // parts}–{100 * (k + 1) // parts}%", which == k) for k in range(parts)]
@@ -66,6 +77,7 @@ def summary_table(log: RunLog, parts: int = 10) -> str:
             f"| {ep['length'][mask].mean():.1f} | {ep['return'][mask].mean():.4g} |"
             + (f" {evader[mask].mean():.4g} |" if evader is not None else "")
         )
+    lines += ["", *TABLE_NOTES]
     return "\n".join(lines)
 
 
@@ -122,7 +134,24 @@ def describe(log: RunLog) -> str:
         f" · {meta.get('created', '')}",
         f"command: {meta.get('command', '?')}",
     ]
+    if log.n_episodes:
+        lines.append(_time_line(log))
     return "\n".join(lines)
+
+
+def _time_line(log: RunLog) -> str:
+    """The run's simulated time per game and, from the run's summary, its wall time."""
+    train = log.metadata.get("train")
+    games = train.get("num_envs") if isinstance(train, dict) else None
+    text = f"simulated time: {float(log.episodes['t1'].max()):,.0f} s in each game"
+    if games:
+        text += f" ({games} games stepped together)"
+    try:
+        summary = json.loads((log.path.parent / SUMMARY_NAME).read_text(encoding="utf-8"))
+        wall = float(summary["wall_time_s"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return text
+    return text + f"; wall time of the last session: {wall:,.1f} s ({SUMMARY_NAME})"
 
 
 # --------------------------------------------------------------------------- episodes
@@ -160,9 +189,19 @@ def action_text(action: np.ndarray) -> str:
     return ACTION_NAMES[int(action)]
 
 
+def _outcome(scenario: Scenario, traj: Trajectory) -> str:
+    """How an episode ended, in a few words."""
+    if traj.captured.any():
+        return "captured"
+    if scenario.collisions.mode == "terminate" and traj.length and traj.collisions[-1]:
+        return "ended by a collision"
+    return "time limit, not captured" if traj.length >= scenario.max_steps else "not captured"
+
+
 def episode_text(scenario: Scenario, traj: Trajectory) -> str:
-    """Every state of an episode as a text board, with the actions that led to it."""
-    from ..envs.render import render_text
+    """Every state of an episode as a text board, with the actions that led to it and what
+    touched (:data:`~a2cm_phys.envs.render.TEXT_LEGEND` under the header line)."""
+    from ..envs.render import TEXT_LEGEND, render_text, step_contacts
 
     n = scenario.pursuers
     evader_return = (
@@ -171,66 +210,31 @@ def episode_text(scenario: Scenario, traj: Trajectory) -> str:
     out = [
         f"episode {traj.episode}: env {traj.env}, seed {traj.seed}, {traj.length} steps "
         f"({traj.length * traj.dt:g} s), return {traj.reward.sum():g}{evader_return}, "
-        f"{'captured' if traj.captured.any() else 'not captured'}"
-        f", {int(traj.collisions.sum())} collisions"
+        f"{_outcome(scenario, traj)}, {int(traj.collisions.sum())} collision(s)",
+        TEXT_LEGEND,
+        "",
     ]
     for k in range(traj.length + 1):
-        head = f"t={k}"
+        head, contacts = f"t={k}", None
         if k:
             row = traj.actions[k - 1]
             acts = " ".join(f"{i}:{action_text(a)}" for i, a in enumerate(row[:n]))
             head += f"  actions {acts} E:{action_text(row[n])}  reward {traj.reward[k - 1]:g}"
             if traj.evader_reward is not None:
                 head += f"  evader reward {traj.evader_reward[k - 1]:g}"
+            if traj.captured[k - 1] or traj.collisions[k - 1]:
+                before, after = traj.positions[k - 1], traj.positions[k]
+                contacts = step_contacts(scenario, before, after, traj.events, k)
             if traj.captured[k - 1]:
-                head += "  CAPTURED"
+                who = ", ".join(map(str, contacts.capturers))
+                plural = "s" if len(contacts.capturers) > 1 else ""
+                head += f"  CAPTURED (by pursuer{plural} {who})" if who else "  CAPTURED"
             if traj.collisions[k - 1]:
+                pairs = "; ".join(f"{i} and {j}" for i, j in contacts.collisions)
                 head += f"  collisions {traj.collisions[k - 1]}"
-        out += [head, render_text(scenario, traj.positions[k]), ""]
+                head += f" (pursuers {pairs})" if pairs else ""
+        out += [head, render_text(scenario, traj.positions[k], contacts), ""]
     return "\n".join(out)
-
-
-def episode_frames(scenario: Scenario, traj: Trajectory, max_frames: int) -> list[np.ndarray]:
-    """RGB frames of (at most ``max_frames`` evenly spaced) states of an episode. Physics
-    episodes show each agent's path so far as a trail: every state up to the frame's, also
-    the ones between frames, so a continuous path is drawn whole however few frames."""
-    from ..envs.render import render_rgb
-
-    states = np.unique(np.linspace(0, traj.length, min(max_frames, traj.length + 1)).round())
-    trails = scenario.mode == "physics"
-    frames = []
-    for k in states.astype(int):
-        vel = None if traj.velocities is None else traj.velocities[k]
-        title = f"episode {traj.episode}  step {k}/{traj.length}"
-        if traj.dt != 1.0:
-            title += f"  t={k * traj.dt:.1f} s"
-        if k == traj.length and traj.captured[-1]:
-            title += "  captured"
-        trail = traj.positions[:k] if trails else None
-        frames.append(
-            render_rgb(scenario, traj.positions[k], vel, title=title, pixels=240, trail=trail)
-        )
-    return frames
-
-
-def save_picture(frames: list[np.ndarray], path: Path, kind: str, fps: float) -> None:
-    """A GIF animation or a PNG contact sheet (up to 4 frames a row) of ``frames``."""
-    from PIL import Image
-
-    images = [Image.fromarray(f) for f in frames]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if kind == "gif":
-        images[0].save(
-            path, save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0
-        )
-        return
-    cols = min(4, len(images))
-    rows = -(-len(images) // cols)
-    w, h = images[0].size
-    sheet = Image.new("RGB", (cols * w, rows * h), "white")
-    for i, im in enumerate(images):
-        sheet.paste(im, ((i % cols) * w, (i // cols) * h))
-    sheet.save(path)
 
 
 # --------------------------------------------------------------------------- export
@@ -245,7 +249,8 @@ def export_foxglove(log: RunLog, out: Path, episodes: list[int] | None) -> int:
     from mcap.writer import CompressionType, Writer
 
     from ..record.scene import episode_scenes
-    from ..record.schemas import METADATA_NAME, SCENE_SCHEMA, schema_bytes
+    from ..record.schemas import METADATA_NAME
+    from ..record.sdk import register_scene_channel
 
     scenario = log.scenario
     trajs = log.trajectories() if episodes is None else (find_trajectory(log, e) for e in episodes)
@@ -255,10 +260,7 @@ def export_foxglove(log: RunLog, out: Path, episodes: list[int] | None) -> int:
         writer = Writer(fh, compression=CompressionType.ZSTD)
         writer.start(library="a2cm_phys replay")
         writer.add_metadata(METADATA_NAME, {k: json.dumps(v) for k, v in log.metadata.items()})
-        schema = writer.register_schema(
-            SCENE_SCHEMA["title"], "jsonschema", schema_bytes(SCENE_SCHEMA)
-        )
-        channel = writer.register_channel(EXPORT_TOPIC, "json", schema)
+        channel = register_scene_channel(writer, EXPORT_TOPIC, {})  # the SDK's protobuf schema
         for traj in trajs:
             shifted = dataclasses.replace(traj, t0=clock)
             for log_time, data in episode_scenes(scenario, shifted):

@@ -4,7 +4,10 @@
 :func:`reference_of` the one reference every command, figure and the report compare
 against (:func:`reference_policy`: the optimum on grids; the oracle driven in physics, or
 ``pursuit`` under continuous control). :func:`reference_report` is it as ``evaluate``
-reports it."""
+reports it.
+
+Episodes played can be counted on a :class:`~a2cm_phys.base.progress.Progress` (stderr),
+so that a long evaluation is never silent."""
 
 from __future__ import annotations
 
@@ -13,10 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from ..analysis.policies import (
-    pursuer_policy,
-)
+from ..analysis.policies import pursuer_policy
 from ..analysis.stats import describe
+from ..base.progress import Progress
 from ..config import ConfigError, Scenario
 from ..envs.vector import VectorEnv
 from ..training.rollout import Policy
@@ -64,16 +66,23 @@ def play(
     num_envs: int = 16,
     seed: int = 0,
     evader: Policy | None = None,
+    progress: Progress | None = None,
+    status: str | None = None,
 ) -> EvalResult:
     """Play ``episodes`` episodes of ``policy`` in up to ``num_envs`` games, seeded; a
-    learned evader's ``evader`` policy acts where the scenario's evader is learned."""
+    learned evader's ``evader`` policy acts where the scenario's evader is learned.
+
+    ``progress`` counts the episodes as they are kept and shows ``status`` beside the
+    count (default: the mean length of the episodes so far)."""
     num_envs = max(1, min(num_envs, episodes))
     env = VectorEnv(scenario, num_envs)
     obs, rng = env.reset(seed), policy_rng(seed)
     quota = np.full(num_envs, episodes // num_envs)
     quota[: episodes % num_envs] += 1
     per_env: list[list] = [[] for _ in range(num_envs)]
-    remaining = episodes
+    remaining, steps = episodes, 0
+    if progress is not None and status is not None:
+        progress.note(status)
     while remaining:
         actions = policy(obs, rng)
         if evader is None:
@@ -81,10 +90,16 @@ def play(
         else:
             step = env.step(actions, evader(obs, rng)[:, 0], validate=False)
         obs = step.obs
+        kept = 0
         for ep in step.episodes:
             if len(per_env[ep.env]) < quota[ep.env]:
                 per_env[ep.env].append(ep)
-                remaining -= 1
+                kept, steps = kept + 1, steps + ep.length
+        remaining -= kept
+        if progress is not None:  # every step: a line is due by the clock, not by episodes
+            if kept and status is None:
+                progress.note(f"mean length {steps / (episodes - remaining):.1f}")
+            progress.update(kept)
     env.close()
     eps = [ep for game in per_env for ep in game]
     return EvalResult(
@@ -99,16 +114,17 @@ def play(
 # ---------------------------------------------------------------------- references
 
 
-def optimum(scenario: Scenario) -> dict[str, float] | None:
+def optimum(scenario: Scenario, progress: bool = False) -> dict[str, float] | None:
     """The exact optimum of a grid scenario from its default start (expected capture steps
-    and return under the raw reward), or ``None`` where the oracle does not solve it."""
+    and return under the raw reward), or ``None`` where the oracle does not solve it
+    (``progress``: report a solve on stderr)."""
     if scenario.mode != "grid" or scenario.evader == "learned":
         return None
     from ..solve import TooLargeError, UnsupportedError
     from ..solve.cache import load_or_solve
 
     try:
-        sol = load_or_solve(scenario)
+        sol = load_or_solve(scenario, progress=progress)
     except (TooLargeError, UnsupportedError):
         return None
     start = sol.start_positions()
@@ -176,36 +192,45 @@ def reference_of(
     episodes: int = 500,
     num_envs: int = 16,
     seed: int = REFERENCE_SEED,
+    progress: bool = False,
 ) -> ReferenceResult | None:
     """The reference beside a result in ``scenario``: the pursuer policy ``name``
     (default: :func:`reference_policy`; ``none``: no reference, ``None``). The oracle's on
     a grid is its exact optimum; any other is played for ``episodes`` episodes in up to
     ``num_envs`` games from ``seed``. Where it cannot be had (an arena too large for the
     oracle; a grid whose evader is learned, which has no single optimum) the result says
-    why in ``unavailable``."""
+    why in ``unavailable``. ``progress``: count the episodes played (and report a solve)
+    on stderr."""
     name = name or reference_policy(scenario)
     if name == "none":
         return None
     if name == "oracle" and scenario.mode == "grid":
-        best = optimum(scenario)
+        best = optimum(scenario, progress)
         if best is not None:
             return ReferenceResult(name, optimum=best)
-        if scenario.evader == "learned":
-            return ReferenceResult(name, unavailable="no exact optimum against a learned evader")
+    if scenario.evader == "learned":  # no fixed evader to play against, nor to solve for
+        return ReferenceResult(name, unavailable="no reference against a learned evader")
     try:
-        policy = pursuer_policy(name, scenario)
+        policy = pursuer_policy(name, scenario, progress=progress)
     except ConfigError as err:  # e.g. an arena too large for the oracle
         return ReferenceResult(name, unavailable=str(err))
-    return ReferenceResult(name, played=play(scenario, policy, episodes, num_envs, seed))
+    with Progress(f"reference ({name})", episodes, "ep", enabled=progress) as bar:
+        played = play(scenario, policy, episodes, num_envs, seed, progress=bar)
+    return ReferenceResult(name, played=played)
 
 
 def reference_report(
-    scenario: Scenario, name: str, episodes: int, num_envs: int, seed: int
+    scenario: Scenario,
+    name: str,
+    episodes: int,
+    num_envs: int,
+    seed: int,
+    progress: bool = False,
 ) -> dict[str, Any] | None:
     """:func:`reference_of` as ``evaluate`` reports it: the exact optimum's figures, the
     played policy's statistics with their CIs, or why it is unavailable (``None`` for
     ``none``)."""
-    ref = reference_of(scenario, name, episodes, num_envs, seed)
+    ref = reference_of(scenario, name, episodes, num_envs, seed, progress)
     if ref is None:
         return None
     if ref.unavailable is not None:

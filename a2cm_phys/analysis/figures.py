@@ -1,196 +1,53 @@
-"""Learning curves from run logs alone (the ``plot`` command draws them).
+"""Learning-curve figures from run logs alone (the ``plot`` command and the report draw them).
 
-Like the paper's figures 5–12: return per episode and steps per episode (each episode
-faint, a moving average bold), and collisions per episode; several runs overlaid (A2C
-against A2CM), each labelled from its log's metadata (:func:`plot_runs`). The runs are read
-from their logs by :mod:`.run_series` (a damaged or empty log is an error, not an empty
-figure). Runs as seeds (:func:`plot_aggregate`): the mean across runs with a 95% band
-against environment steps, the optimum or a reference policy dashed (:func:`reference_for`).
-Exact exploitability, where a run logged it, against the game's value where it is cached.
+Single runs (:mod:`.curves`: :func:`plot_runs`): each run's moving average against
+environment steps, the reference dashed, the return split into its time and collision
+parts. Runs as seeds (:func:`aggregate_figure`, :func:`plot_aggregate`): one panel per
+scenario, one line per label, the mean across runs with a 95% band against environment
+steps, the optimum or a reference policy dashed (:func:`~.figure_parts.reference_for`), or
+a note of why there is none. Exact exploitability, where a run logged it, against the
+game's value where it is cached (:mod:`.exploit_figure`). Every axis follows one y-scale
+rule and names it (:data:`~.figure_parts.Y_SCALES`).
 """
 
 from __future__ import annotations
 
+import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..config import Scenario
-from .run_series import EXPLOIT_SERIES, Run
+from .curves import moving_average, plot_runs, runs_figure, unique_labels
+from .exploit_figure import EXPLOIT_FILE
+from .figure_parts import (
+    COLOURS,
+    Y_SCALES,
+    Reference,
+    axis_label,
+    draw_reference,
+    reference_for,
+)
+from .run_series import Run, penalised
 
 __all__ = [
     "COLOURS",
     "EXPLOIT_FILE",
-    "SERIES",
     "Panel",
     "Reference",
+    "aggregate_figure",
     "binned",
     "moving_average",
     "panels_of",
     "plot_aggregate",
     "plot_runs",
     "reference_for",
+    "runs_figure",
     "seed_band",
     "unique_labels",
 ]
-
-COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#17becf")
-SERIES = (
-    ("return", "returns.png", "Return per episode", "return (raw team reward)"),
-    ("length", "lengths.png", "Steps per episode", "steps"),
-    ("collisions", "collisions.png", "Collisions per episode", "pursuer collisions"),
-)
-"""(column, file, title, y label) of each figure."""
-EXPLOIT_FILE = "exploitability.png"
-
-
-def moving_average(values: np.ndarray, window: int) -> np.ndarray:
-    """Trailing mean over up to ``window`` episodes (shorter at the start)."""
-    values = np.asarray(values, dtype=np.float64)
-    if len(values) == 0:
-        return values
-    csum = np.concatenate([[0.0], np.cumsum(values)])
-    idx = np.arange(1, len(values) + 1)
-    lo = np.maximum(idx - window, 0)
-    return (csum[idx] - csum[lo]) / (idx - lo)
-
-
-def unique_labels(runs: list[Run], paths: list[Path]) -> list[str]:
-    """Each run's label, its folder's name added where two runs share one."""
-    labels = [r.label for r in runs]
-    return [
-        f"{lab} ({p.name})" if labels.count(lab) > 1 else lab
-        for lab, p in zip(labels, paths, strict=True)
-    ]
-
-
-def _draw(
-    ax: object, runs: list[Run], labels: list[str], column: str, window: int, ylabel: str
-) -> None:
-    for i, (run, label) in enumerate(zip(runs, labels, strict=True)):
-        colour = COLOURS[i % len(COLOURS)]
-        y = run.columns[column].astype(np.float64)
-        x = np.arange(1, len(y) + 1)
-        ax.plot(x, y, color=colour, alpha=0.18, lw=0.6, rasterized=True)
-        ax.plot(
-            x,
-            moving_average(y, window),
-            color=colour,
-            lw=2.0,
-            label=f"{label}: {len(y):,} episodes, mean of last {min(window, len(y))} "
-            f"= {moving_average(y, window)[-1]:.3g}"
-            if len(y)
-            else label,
-        )
-    ax.set_xlabel("episode")
-    ax.set_ylabel(ylabel)
-    ax.grid(True, alpha=0.3)
-    ax.margins(x=0.01)
-    if column == "length":
-        top = max((float(r.columns[column].max(initial=1)) for r in runs), default=1.0)
-        if top > 100:
-            ax.set_yscale("log")
-    ax.legend(loc="best", fontsize=8, framealpha=0.85)
-
-
-def plot_runs(runs: list[Run], labels: list[str], out: Path, window: int) -> list[Path]:
-    """Write the figures of ``runs`` into ``out``; return their paths."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib.figure import Figure
-
-    out.mkdir(parents=True, exist_ok=True)
-    titles = sorted({r.title for r in runs})
-    suffix = f" — {'; '.join(titles)}" if titles else ""
-    written = []
-    for column, name, title, ylabel in SERIES:
-        fig = Figure(figsize=(9, 4.8), dpi=120, layout="constrained")
-        ax = fig.add_subplot()
-        _draw(ax, runs, labels, column, window, ylabel)
-        ax.set_title(f"{title} (moving average over {window}){suffix}", fontsize=10)
-        fig.savefig(out / name)
-        written.append(out / name)
-    fig = Figure(figsize=(9, 11), dpi=110, layout="constrained")
-    for k, (column, _, title, ylabel) in enumerate(SERIES):
-        ax = fig.add_subplot(len(SERIES), 1, k + 1)
-        _draw(ax, runs, labels, column, window, ylabel)
-        ax.set_title(title, fontsize=10)
-    fig.suptitle(f"Learning curves (moving average over {window}){suffix}", fontsize=11)
-    fig.savefig(out / "overview.png")
-    written.append(out / "overview.png")
-    if any(r.exploit for r in runs):
-        fig = Figure(figsize=(9, 4.8), dpi=120, layout="constrained")
-        ax = fig.add_subplot()
-        _draw_exploit(ax, runs, labels)
-        _draw_game_values(ax, [r.scenario for r in runs if r.exploit and r.scenario])
-        ax.set_title(f"Exploitability (exact best responses){suffix}", fontsize=10)
-        fig.savefig(out / EXPLOIT_FILE)
-        written.append(out / EXPLOIT_FILE)
-    return written
-
-
-def _draw_exploit(ax: object, runs: list[Run], labels: list[str]) -> None:
-    """Each run's exploitability metrics against environment steps (one colour per run)."""
-    for i, (run, label) in enumerate(zip(runs, labels, strict=True)):
-        colour = COLOURS[i % len(COLOURS)]
-        for key, what, style in EXPLOIT_SERIES:
-            if key not in run.exploit:
-                continue
-            steps, values = run.exploit[key]
-            ax.plot(
-                steps,
-                values,
-                style,
-                color=colour,
-                marker="o",
-                ms=3,
-                lw=1.6,
-                label=f"{label}: {what}, last {values[-1]:.4g}",
-            )
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("expected capture time (steps)")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize=8, framealpha=0.85)
-
-
-def _draw_game_values(ax: object, scenarios: list[Scenario]) -> None:
-    """The game's value of each distinct game, a grey band between its bounds, where it
-    is cached (``oracle --game-value``: minutes to solve, too long for a plot); a note
-    otherwise."""
-    from ..solve.cache import cached_value, value_cache_key
-
-    seen: set[str] = set()
-    for sc in scenarios:
-        if sc.mode != "grid" or value_cache_key(sc) in seen:
-            continue
-        seen.add(value_cache_key(sc))
-        value = cached_value(sc)
-        if value is None:
-            print(
-                f"note: the game's value of {sc.name} is not cached; `python -m"
-                f" a2cm_phys.oracle --scenario {sc.name} --game-value` solves it for this figure"
-            )
-            continue
-        label = f"{sc.name}: the game's value, {value.lower:.4g}–{value.upper:.4g}"
-        ax.axhspan(value.lower, value.upper, color="0.55", alpha=0.5, lw=0, zorder=0)
-        ax.axhline(value.lower, color="0.35", ls="--", lw=1.0, label=label)
-    if seen:
-        ax.legend(loc="best", fontsize=8, framealpha=0.85)
-
-
-# --------------------------------------------------------------------------- runs as seeds
-
-
-@dataclass(frozen=True)
-class Reference:
-    """A dashed line on aggregate panels: the optimum or a reference policy."""
-
-    name: str
-    length: float
-    ret: float
 
 
 @dataclass
@@ -230,92 +87,111 @@ def seed_band(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return mean, mean - half, mean + half
 
 
-def _spans_decades(values: np.ndarray) -> bool:
-    v = values[np.isfinite(values) & (values > 0)]
-    return bool(v.size) and float(v.max() / v.min()) > 20
+def shown_column(column: str, reference: Reference | None) -> str:
+    """What a ``column`` panel shows: ``return`` becomes ``relative`` (the return ÷ the
+    reference's) where the panel has a reference return; every other column is itself."""
+    ref = reference
+    if column != "return" or ref is None or ref.unavailable is not None:
+        return column
+    return "relative" if math.isfinite(ref.ret) and ref.ret else column
+
+
+def _clipped(
+    column: str, values: np.ndarray, lo: np.ndarray, hi: np.ndarray, mean: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A t band kept within the episodes' ``values`` (no mean of them lies outside; a band
+    of few, skewed seeds would reach below one step, below no collision, above a zero
+    return)."""
+    values = values[np.isfinite(values)]
+    if values.size:
+        lo, hi = np.maximum(lo, values.min()), np.minimum(hi, values.max())
+    if column == "relative":  # a log axis: a band edge at or below zero cannot be drawn
+        lo = np.maximum(lo, np.abs(mean) * 1e-3)
+    return lo, hi
+
+
+def _draw_panel(ax: object, panel: Panel, column: str, bins: int) -> str:
+    """``column`` of ``panel``'s runs per env-step bin, each label's mean with its 95%
+    band, the reference dashed (or why there is none); return the column shown."""
+    shown = shown_column(column, panel.reference)
+    all_runs = [r for rs in panel.runs.values() for r in rs]
+    top = max((float(r.columns["env_steps"].max(initial=0)) for r in all_runs), default=1)
+    edges = np.linspace(0.0, max(top, 1.0), bins + 1)
+    centres = (edges[:-1] + edges[1:]) / 2
+    if panel.reference is not None:
+        draw_reference(ax, panel.reference, shown)
+    for i, (label, runs) in enumerate(panel.runs.items()):
+        if not runs:
+            continue
+        colour = COLOURS[i % len(COLOURS)]
+        rows = np.array([binned(r, column, edges) for r in runs])
+        if shown == "relative":
+            rows = rows / panel.reference.ret
+        mean, lo, hi = seed_band(rows)
+        values = np.concatenate([r.columns[column] for r in runs]).astype(np.float64)
+        if shown == "relative":
+            values = values / panel.reference.ret
+        lo, hi = _clipped(shown, values, lo, hi, mean)
+        drawn = np.isfinite(mean)  # bins where no episode ended are skipped, not gaps
+        ax.plot(
+            centres[drawn],
+            mean[drawn],
+            color=colour,
+            lw=1.8,
+            marker="." if drawn.sum() < 15 else None,
+            label=f"{label} ({len(runs)} seeds)",
+        )
+        band = np.isfinite(lo) & np.isfinite(hi)
+        ax.fill_between(centres[band], lo[band], hi[band], color=colour, alpha=0.2, lw=0)
+    ax.set_yscale(Y_SCALES[shown])
+    ax.set_xlabel("environment steps (all games)")
+    ax.grid(True, alpha=0.3)
+    ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 3))
+    ax.legend(loc="best", fontsize=7, framealpha=0.85)
+    return shown
+
+
+def aggregate_figure(
+    panels: list[Panel], columns: Sequence[str], title: str, bins: int = 60
+) -> object:
+    """A matplotlib ``Figure`` of ``panels`` side by side, one row per column (``length``,
+    ``time``, ``collision_part``, ``collisions``, or ``return``: relative to the panel's
+    reference where it has one): each label's mean across its runs per env-step bin with
+    a 95% band, the reference dashed. The ``collision_part`` row is left out where no
+    run's scenario penalises collisions (the return is all time part)."""
+    from matplotlib.figure import Figure
+
+    if not any(penalised(r) for p in panels for rs in p.runs.values() for r in rs):
+        columns = [c for c in columns if c != "collision_part"] or ["time"]  # no penalty
+    cols = max(1, len(panels))
+    fig = Figure(
+        figsize=(4.2 * cols + 0.6, 0.6 + 3.6 * len(columns)), dpi=110, layout="constrained"
+    )
+    for row, column in enumerate(columns):
+        first = None
+        for k, panel in enumerate(panels):
+            ax = fig.add_subplot(len(columns), cols, row * cols + k + 1)
+            shown = _draw_panel(ax, panel, column, bins)
+            if row == 0:
+                ax.set_title(panel.title, fontsize=9)
+            if first is None or shown != first:  # each row's label, and where it differs
+                ax.set_ylabel(axis_label(shown), fontsize=8)
+            first = first or shown
+    fig.suptitle(title, fontsize=10)
+    return fig
 
 
 def plot_aggregate(
-    panels: list[Panel], column: str, path: Path, title: str, bins: int = 60
+    panels: list[Panel], column: str | Sequence[str], path: Path, title: str, bins: int = 60
 ) -> Path:
-    """One figure of ``panels`` side by side: ``column`` (``length`` or ``return``, the
-    latter relative to the panel's reference) per env-step bin, mean across each label's
-    runs with a 95% band, the reference dashed; log scale where values span decades."""
+    """Write :func:`aggregate_figure` of ``column`` (one, or several as rows) to ``path``."""
     import matplotlib
 
     matplotlib.use("Agg")
-    from matplotlib.figure import Figure
-
     path.parent.mkdir(parents=True, exist_ok=True)
-    cols = max(1, len(panels))
-    fig = Figure(figsize=(4.2 * cols + 0.6, 4.2), dpi=110, layout="constrained")
-    for k, panel in enumerate(panels):
-        ax = fig.add_subplot(1, cols, k + 1)
-        all_runs = [r for rs in panel.runs.values() for r in rs]
-        top = max((float(r.columns["env_steps"].max(initial=0)) for r in all_runs), default=1)
-        edges = np.linspace(0.0, max(top, 1.0), bins + 1)
-        centres = (edges[:-1] + edges[1:]) / 2
-        relative = column == "return" and panel.reference is not None and panel.reference.ret
-        drawn = []
-        for i, (label, runs) in enumerate(panel.runs.items()):
-            if not runs:
-                continue
-            colour = COLOURS[i % len(COLOURS)]
-            rows = np.array([binned(r, column, edges) for r in runs])
-            if relative:
-                rows = rows / panel.reference.ret
-            mean, lo, hi = seed_band(rows)
-            if column == "length":  # a t band of skewed lengths can dip below one step
-                lo = np.maximum(lo, 1.0)
-            drawn.append(mean)
-            shown = np.isfinite(mean)  # bins where no episode ended are skipped, not gaps
-            ax.plot(
-                centres[shown],
-                mean[shown],
-                color=colour,
-                lw=1.8,
-                marker="." if shown.sum() < 15 else None,
-                label=f"{label} ({len(runs)} seeds)",
-            )
-            band = np.isfinite(lo) & np.isfinite(hi)
-            ax.fill_between(centres[band], lo[band], hi[band], color=colour, alpha=0.2, lw=0)
-        ref = panel.reference
-        if ref is not None:
-            level = 1.0 if relative else ref.length if column == "length" else ref.ret
-            if column == "length" or relative:
-                ax.axhline(level, color="k", ls="--", lw=1.2, label=f"{ref.name}: {level:.3g}")
-                drawn.append(np.array([level]))
-        values = np.concatenate(drawn) if drawn else np.zeros(0)
-        if _spans_decades(values):
-            ax.set_yscale("log")
-        ax.set_title(panel.title, fontsize=9)
-        ax.set_xlabel("environment steps")
-        if k == 0:
-            ax.set_ylabel(
-                "steps per episode"
-                if column == "length"
-                else "return ÷ reference's return (1 = as good)"
-                if relative
-                else "return (raw team reward)"
-            )
-        ax.grid(True, alpha=0.3)
-        ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 3))
-        ax.legend(loc="best", fontsize=7, framealpha=0.85)
-    fig.suptitle(title, fontsize=10)
-    fig.savefig(path)
+    columns = [column] if isinstance(column, str) else list(column)
+    aggregate_figure(panels, columns, title, bins).savefig(path)
     return path
-
-
-def reference_for(scenario: Scenario, episodes: int = 500) -> Reference | None:
-    """The dashed line of a scenario: its reference (:func:`~.evaluation.reference_of`),
-    the exact optimum on grids the oracle solves, else the reference policy played for
-    ``episodes`` episodes; ``None`` where there is none."""
-    from .evaluation import reference_of
-
-    ref = reference_of(scenario, episodes=episodes)
-    if ref is None or ref.unavailable is not None:
-        return None
-    return Reference("optimum (oracle)" if ref.exact else ref.label, ref.length, ref.ret)
 
 
 def panels_of(

@@ -34,7 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from ..config import ConfigError, Physics, Scenario, load_scenario
+from ..config import ConfigError, Physics, Scenario, build, load_scenario
+from ..deploy import Team, load_team
 from ..envs.core import ACTION_DELTAS
 from ..solve.cache import OracleSolution, load_or_solve
 from ..training.rollout import Policy
@@ -45,6 +46,7 @@ from .names import (
     EVADER_POLICIES,
     PURSUER_POLICIES,
     SOLVED_EVADERS,
+    oracle_evader,
 )
 
 
@@ -78,7 +80,7 @@ def grid_twin(scenario: Scenario) -> Scenario:
     """The grid game the oracle solves for a scenario: a physics scenario at the resolution
     of its cells, and against the random evader where the evader is learned (the oracle
     is then the team that is optimal against the random evader)."""
-    evader = "random" if scenario.evader == "learned" else scenario.evader
+    evader = oracle_evader(scenario)
     if scenario.mode == "grid":
         return dataclasses.replace(scenario, evader=evader)
     return dataclasses.replace(
@@ -90,7 +92,8 @@ class OraclePolicy:
     """The optimal joint policy of a grid scenario, acting on global observations.
 
     ``scenario`` is a :class:`Scenario` or a scenario name/path; the solution is loaded from
-    the cache or solved on construction (see :func:`load_or_solve`).
+    the cache or solved on construction (see :func:`load_or_solve`; ``progress``: report
+    a solve on stderr).
     """
 
     def __init__(
@@ -98,9 +101,10 @@ class OraclePolicy:
         scenario: Scenario | str | Path,
         cache_dir: str | Path | None = None,
         solution: OracleSolution | None = None,
+        progress: bool = False,
     ) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-        self.solution = solution or load_or_solve(self.scenario, cache_dir)
+        self.solution = solution or load_or_solve(self.scenario, cache_dir, progress=progress)
 
     def positions(self, obs: np.ndarray) -> np.ndarray:
         """Integer cells ``(B, N + 1, 2)`` decoded from observations ``(B, obs_dim)``."""
@@ -117,15 +121,16 @@ class OraclePolicy:
         return self.solution.expected_capture_steps(positions)
 
 
-def oracle_policy(scenario: Scenario) -> Policy:
-    """The exact optimum of the (grid twin of the) scenario; see the module docstring.
+def oracle_policy(scenario: Scenario, progress: bool = False) -> Policy:
+    """The exact optimum of the (grid twin of the) scenario; see the module docstring
+    (``progress``: report a solve on stderr).
 
     Raises :class:`~a2cm_phys.config.ConfigError` when the oracle cannot solve it.
     """
     from ..solve import TooLargeError, UnsupportedError
 
     try:
-        oracle = OraclePolicy(grid_twin(scenario))
+        oracle = OraclePolicy(grid_twin(scenario), progress=progress)
     except (TooLargeError, UnsupportedError) as err:
         raise ConfigError(f"oracle policy: {err}") from None
     if scenario.mode == "grid":
@@ -141,9 +146,10 @@ def oracle_policy(scenario: Scenario) -> Policy:
     return act
 
 
-def minimax_policy(scenario: Scenario) -> Policy:
+def minimax_policy(scenario: Scenario, progress: bool = False) -> Policy:
     """The minimax team of a grid scenario (of its twin against the random evader where the
-    evader is learned; the team does not depend on the evader). Raises
+    evader is learned; the team does not depend on the evader; ``progress``: report a
+    solve on stderr). Raises
     :class:`~a2cm_phys.config.ConfigError` outside grid mode or where it cannot be solved.
     """
     from ..solve import TooLargeError, UnsupportedError
@@ -154,23 +160,23 @@ def minimax_policy(scenario: Scenario) -> Policy:
         raise ConfigError("minimax policy: the minimax team is solved on grids only")
     twin = grid_twin(scenario)
     try:
-        team = TablePolicy(twin, pursuer_source(twin, "minimax").table)
+        team = TablePolicy(twin, pursuer_source(twin, "minimax", progress=progress).table)
     except (TooLargeError, UnsupportedError) as err:
         raise ConfigError(f"minimax policy: {err}") from None
     return lambda obs, rng: team.act(obs, rng, greedy=True)
 
 
-def pursuer_policy(name: str, scenario: Scenario) -> Policy:
-    """The named pursuer policy for ``scenario`` (one of :data:`PURSUER_POLICIES`)."""
-    makers = {
-        "random": random_policy,
-        "pursuit": pursuit_policy,
-        "oracle": oracle_policy,
-        "minimax": minimax_policy,
-    }
-    if name not in makers:
-        raise ConfigError(f"unknown pursuer policy {name!r} (known: {', '.join(makers)})")
-    return makers[name](scenario)
+def pursuer_policy(name: str, scenario: Scenario, progress: bool = False) -> Policy:
+    """The named pursuer policy for ``scenario`` (one of :data:`PURSUER_POLICIES`;
+    ``progress``: report a solver's progress on stderr)."""
+    solved = {"oracle": oracle_policy, "minimax": minimax_policy}
+    scripted = {"random": random_policy, "pursuit": pursuit_policy}
+    if name in solved:
+        return solved[name](scenario, progress)
+    if name not in scripted:
+        known = ", ".join([*scripted, *solved])
+        raise ConfigError(f"unknown pursuer policy {name!r} (known: {known})")
+    return scripted[name](scenario)
 
 
 @dataclass(frozen=True)
@@ -184,31 +190,51 @@ class Matchup:
 
 
 def matchup(
-    scenario: Scenario, pursuers: str, evader: str | None = None, *, greedy: bool = False
+    scenario: Scenario,
+    pursuers: str,
+    evader: str | None = None,
+    *,
+    greedy: bool = False,
+    progress: bool = False,
 ) -> Matchup:
     """Pursuers ``pursuers`` (a run directory or one of :data:`PURSUER_POLICIES`) against
     ``evader`` (a run directory with a learned evader, or one of :data:`EVADER_POLICIES`;
     ``None``: the scenario's own evader, or the pursuers' run's evader when it is learned)
-    in ``scenario``. Trained policies act greedily when ``greedy``.
+    in ``scenario``. Trained policies act greedily when ``greedy``; ``progress`` reports
+    the solvers' progress (oracle, minimax, best response, equilibrium) on stderr.
     """
     from ..training.runs import load_trained_run, model_policy
 
+    team = load_team(pursuers)
     pursuer_run = (
-        None if pursuers in PURSUER_POLICIES else _run(load_trained_run, "--pursuers", pursuers)
+        None
+        if team is not None or pursuers in PURSUER_POLICIES
+        else _run(load_trained_run, "--pursuers", pursuers)
     )
     if pursuer_run is not None:
         check_layout(pursuer_run.scenario, scenario, pursuers, pursuer_run.pursuers)
+    if team is not None:
+        check_layout(team_scenario(team, pursuers), scenario, pursuers, team)
     evader_model, evader_name = None, evader or scenario.evader
+    team_evader = None
     if evader == BEST_RESPONSE:
-        evader_model, evader_name = best_response_evader(scenario, pursuers), "learned"
+        evader_model = best_response_evader(scenario, pursuers, progress)
+        evader_name = "learned"
     elif evader == EQUILIBRIUM:
-        evader_model, evader_name = equilibrium_evader(scenario), "learned"
+        evader_model, evader_name = equilibrium_evader(scenario, progress), "learned"
     elif evader is not None and evader not in EVADER_POLICIES:
         run = _run(load_trained_run, "--evader", evader)
         if run.evader is None:
             raise ConfigError(f"--evader {evader}: the run has no learned evader")
         check_layout(run.scenario, scenario, evader, run.evader)
         evader_model, evader_name = run.evader, "learned"
+    elif evader is None and scenario.evader == "learned" and team is not None:
+        if "evader" not in team.actors:
+            raise ConfigError(
+                f"scenario '{scenario.name}' has a learned evader and {pursuers} exports none:"
+                f" give --evader (a run directory, or one of {', '.join(EVADER_POLICIES)})"
+            )
+        team_evader = team.rollout_policy(greedy, side="evader")
     elif evader is None and scenario.evader == "learned":
         if pursuer_run is None or pursuer_run.evader is None:
             raise ConfigError(
@@ -220,15 +246,32 @@ def matchup(
     if pursuer_run is not None:
         pursuer_policy_ = model_policy(pursuer_run.pursuers, greedy)
         p_label = f"{_short(pursuers)} ({'greedy' if greedy else 'sampled'})"
+    elif team is not None:
+        pursuer_policy_ = team.rollout_policy(greedy)
+        p_label = f"{pursuers} ({'greedy' if greedy else 'sampled'})"
     else:  # of the scenario, not the game: the oracle stays one team in a cross-play
-        pursuer_policy_, p_label = pursuer_policy(pursuers, scenario), pursuers
+        pursuer_policy_, p_label = pursuer_policy(pursuers, scenario, progress), pursuers
     e_label = _short(evader) if evader_model is not None and evader else evader_name
     e_policy = None if evader_model is None else model_policy(evader_model, greedy)
+    if team_evader is not None:
+        e_label, e_policy = f"{pursuers}'s", team_evader
     if evader == BEST_RESPONSE:  # deterministic: its table has one-hot rows
         e_label, e_policy = BEST_RESPONSE, model_policy(evader_model, greedy=True)
     if evader == EQUILIBRIUM:  # mixed: its greedy move would be some other policy
         e_label, e_policy = EQUILIBRIUM, model_policy(evader_model, greedy=False)
     return Matchup(game, pursuer_policy_, e_policy, f"{p_label} vs {e_label} evader")
+
+
+def team_scenario(team: Team, spec: str) -> Scenario:
+    """The scenario an exported team (``onnx:DIR``, ``pretrained:NAME``) was trained on,
+    from its ``policy.json``."""
+    return build(Scenario, team.scenario, f"{spec} (policy.json)")
+
+
+def exported_scenario(spec: str) -> Scenario | None:
+    """The scenario of the exported team ``spec`` names, or ``None`` if it names none."""
+    team = load_team(spec)
+    return None if team is None else team_scenario(team, spec)
 
 
 LAYOUT_KEYS = ("mode", "pursuers", "control", "actions")
@@ -262,9 +305,10 @@ def check_layout(trained: Scenario, scenario: Scenario, run: str, model: Any = N
             )
 
 
-def best_response_evader(scenario: Scenario, pursuers: str):
+def best_response_evader(scenario: Scenario, pursuers: str, progress: bool = False):
     """The evader's exact best response to ``pursuers`` (a run directory, ``random``,
-    ``oracle`` or ``minimax``), as a table policy with the actors' interface (grids only)."""
+    ``oracle`` or ``minimax``), as a table policy with the actors' interface (grids only;
+    ``progress``: report the solve on stderr)."""
     from ..solve import TooLargeError, UnsupportedError
     from ..solve.best_response import evader_best_response
     from ..solve.tables import TablePolicy
@@ -274,17 +318,17 @@ def best_response_evader(scenario: Scenario, pursuers: str):
         raise ConfigError("--evader best-response: exact best responses exist on grids only")
     twin = grid_twin(scenario)
     try:
-        table = pursuer_source(twin, pursuers).table
-        policy = evader_best_response(twin, table).policy
+        table = pursuer_source(twin, pursuers, progress=progress).table
+        policy = evader_best_response(twin, table, progress=progress).policy
     except (SourceError, TooLargeError, UnsupportedError) as err:
         raise ConfigError(f"--evader best-response: {err}") from None
     return TablePolicy(twin, policy)
 
 
-def equilibrium_evader(scenario: Scenario):
+def equilibrium_evader(scenario: Scenario, progress: bool = False):
     """The game's equilibrium evader (:func:`~a2cm_phys.solve.cache.load_or_solve_value`: cached
     beside the oracle, or solved in minutes), as a table policy with the actors' interface
-    (grids only)."""
+    (grids only; ``progress``: report the solve on stderr)."""
     from ..solve import TooLargeError, UnsupportedError
     from ..solve.cache import load_or_solve_value
     from ..solve.tables import TablePolicy
@@ -293,7 +337,7 @@ def equilibrium_evader(scenario: Scenario):
         raise ConfigError("--evader equilibrium: the game's value is solved on grids only")
     twin = grid_twin(scenario)
     try:
-        return TablePolicy(twin, load_or_solve_value(twin).evader)
+        return TablePolicy(twin, load_or_solve_value(twin, progress=progress).evader)
     except (TooLargeError, UnsupportedError) as err:
         raise ConfigError(f"--evader equilibrium: {err}") from None
 

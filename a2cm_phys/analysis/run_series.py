@@ -3,8 +3,10 @@
 A run folder's log parts are read as one run, each episode once
 (:mod:`a2cm_phys.record.parts`); a damaged or empty log is an error, not an empty series
 (:func:`load_logged_run`). Each episode is placed on the run's environment steps
-(:func:`episode_env_steps`), and the exact exploitability a run logged every K updates is
-kept beside its episodes (:data:`EXPLOIT_SERIES`).
+(:func:`episode_env_steps`), its return split into its time and collision parts
+(:func:`return_parts`), and the exact exploitability a run logged every K updates is kept
+beside its episodes (:data:`EXPLOIT_SERIES`). A run is labelled as :func:`run_label_of`
+says: ``A2CM``, or ``A2CM (paper)`` for a run of a preset.
 """
 
 from __future__ import annotations
@@ -78,9 +80,10 @@ def load_logged_run(path: Path) -> Run:
     columns = {k: log.episodes[k] for k in ("return", "length", "collisions", "captured")}
     columns["env_steps"] = episode_env_steps(log)
     sc = log.scenario
+    columns["time"], columns["collision_part"] = return_parts(sc, columns)
     title = f"{sc.name} ({sc.mode}, collisions {sc.collisions.mode}, {sc.evader} evader)"
     return Run(
-        label=log.label,
+        label=run_label_of(path, log),
         title=title,
         columns=columns,
         clean=log.clean,
@@ -88,6 +91,46 @@ def load_logged_run(path: Path) -> Run:
         scenario=sc,
         problems=list(log.problems),
     )
+
+
+def run_label_of(path: Path, log: RunLog) -> str:
+    """A run's label in plots: the log's own ``label`` if it has one, else the run folder's
+    (:func:`~a2cm_phys.training.runs.run_label`: ``A2CM``, ``A2CM (paper)`` for a run of the
+    paper preset), else, for a log without its folder's ``config.json``, the algorithm and
+    the preset its logged training config matches (:func:`~a2cm_phys.config.matching_preset`).
+    """
+    from ..config import ConfigError, matching_preset
+    from ..training.runs import run_label
+
+    if log.metadata.get("label"):
+        return str(log.metadata["label"])
+    folder = path if path.is_dir() else path.parent
+    if (folder / "config.json").is_file():  # not the checkpoint: that would need torch
+        try:
+            return run_label(folder)
+        except ConfigError:
+            pass
+    train = log.metadata.get("train")
+    preset = matching_preset(train) if isinstance(train, dict) else None
+    return f"{log.label} ({preset})" if preset else log.label
+
+
+def collision_weight(scenario: Scenario) -> float:
+    """The return each pursuer collision costs (0 where collisions are off)."""
+    return scenario.rewards.collision if scenario.collisions.mode != "off" else 0.0
+
+
+def penalised(run: Run) -> bool:
+    """Whether the run's scenario gives collisions a penalty (a return with a collision part)."""
+    return run.scenario is not None and collision_weight(run.scenario) != 0
+
+
+def return_parts(scenario: Scenario, columns: dict[str, np.ndarray]) -> tuple[np.ndarray, ...]:
+    """Each episode's return split into ``(time, collision)``: the collision part is its
+    collisions times the collision penalty, the time part the rest (step, capture and wall
+    rewards); they sum to the return."""
+    collision = columns["collisions"].astype(np.float64) * collision_weight(scenario)
+    return columns["return"].astype(np.float64) - collision, collision
 
 
 def episode_env_steps(log: RunLog) -> np.ndarray:

@@ -8,7 +8,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-COMMANDS = ("train", "evaluate", "replay", "plot", "oracle", "sweep", "experiments")
+COMMANDS = ("train", "evaluate", "replay", "plot", "oracle", "export", "sweep", "experiments")
 """The commands, in the order a newcomer meets them."""
 
 

@@ -11,6 +11,21 @@ on grids the oracle solves, the exact optimum and the gap to it; in physics a re
 policy played on the same episodes (``--reference``).
 ``--cross-play`` plays every pairing of comma-separated lists of pursuers and evaders.
 
+``--render gif|png`` then plays ``--render-episodes`` more episodes of the same pairing in
+one game from the same seed (greedy or not, as evaluated: greedy, the first is the first
+episode of the evaluation's first game) and draws each as ``replay`` draws a logged one
+(:mod:`a2cm_phys.analysis.playback`, :mod:`a2cm_phys.analysis.pictures`): a GIF at the
+game's pace or a PNG contact sheet, with a legend and a caption for a capture or a
+collision, one file per episode, by default ``STEM-epN.gif`` in the current folder
+(``pretrained-NAME``, ``onnx-FOLDER``, ``POLICY-SCENARIO`` or the run's name); each file
+written is a line ``wrote FILE (…how the episode ended)`` after the report (with
+``--json``: the report's ``pictures``). So ``evaluate --pursuers pretrained:grid_collision
+--greedy --render gif`` shows a trained team right after installing, with no training.
+
+The episodes played are counted on stderr (a bar on a terminal, else a line every
+``A2CM_PROGRESS_SECONDS``, 30 s by default; ``--no-progress`` or ``A2CM_PROGRESS=0``
+silences it), as are a reference policy's and the solvers' work; stdout holds the report.
+
 Episodes are played in several games at once without favouring short ones: each game plays
 a fixed quota of consecutive episodes (episodes it finishes after its quota are ignored).
 """
@@ -18,21 +33,24 @@ a fixed quota of consecutive episodes (episodes it finishes after its quota are 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import math
 import sys
 from collections.abc import Sequence
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-from ..analysis.evaluation import (
-    play,
-    reference_policy,
-    reference_report,
-)
 from ..analysis.names import EVADER_POLICIES, PURSUER_POLICIES, is_named
-from ..analysis.policies import Matchup, matchup
 from ..config import ConfigError, Scenario
-from ..training.runs import load_trained_run
 from .options import SEED, Parser, add_scenario_options, int_range, run_cli, scenario_from_args
+from .picture_options import add_render_options, check_render, draw_episodes
+
+if TYPE_CHECKING:
+    from ..analysis.policies import Matchup
+
+# Modules that reach torch or the solvers are imported where they are used, after the
+# command line is parsed, so that --help answers at once.
 
 # ---------------------------------------------------------------------- formatting
 
@@ -42,6 +60,9 @@ def format_report(report: dict[str, Any], title: str) -> str:
     lines = [title, f"{'':24}{'value':>12}  95% CI"]
 
     def row(name: str, s: dict[str, float], pct: bool = False) -> None:
+        if not math.isfinite(s["value"]):  # a statistic of no episode: no capture
+            lines.append(f"{name:24}{'none':>12}  (no episode ended in a capture)")
+            return
         k, fmt = (100.0, "{:.1f}%") if pct else (1.0, "{:,.3f}")
         v, lo, hi = (fmt.format(k * s[key]) for key in ("value", "lo", "hi"))
         lines.append(f"{name:24}{v:>12}  [{lo}, {hi}]")
@@ -73,11 +94,20 @@ def format_report(report: dict[str, Any], title: str) -> str:
                 f"reference, {ref['policy']}: capture steps {ref_steps:.3f}, return "
                 f"{ref_ret:,.3f}, collisions / episode {coll:.4f}"
             )
-        lines.append(
-            f"gap to the reference: capture steps {100 * (steps / ref_steps - 1):+.1f}%,"
-            f" return {ret / ref_ret:.3f}× the reference's"
-        )
+        lines.append(f"gap to the reference, capture steps: {_gap(steps, ref_steps, ' steps')}")
+        lines.append(f"gap to the reference, return: {_gap(ret, ref_ret)}")
     return "\n".join(lines)
+
+
+def _gap(value: float, ref: float, unit: str = "") -> str:
+    """``value`` against ``ref`` as a difference, with the per cent where ``ref`` is a
+    positive amount (steps): never a ratio of two returns, whose sign would mislead."""
+    if not (math.isfinite(value) and math.isfinite(ref)):
+        missing = "the result" if not math.isfinite(value) else "the reference"
+        return f"none ({missing} has no value: no episode of it ended in a capture)"
+    diff = value - ref
+    pct = f" ({100 * diff / ref:+.1f}%)" if unit and ref > 0 else ""
+    return f"{diff:+,.3f}{unit}{pct} against the reference's {ref:,.3f}"
 
 
 def format_cross_play(rows: list[dict[str, Any]]) -> str:
@@ -88,14 +118,23 @@ def format_cross_play(rows: list[dict[str, Any]]) -> str:
     ]
     for r in rows:
         s, c, k = r["capture_steps"]["mean"], r["capture_rate"], r["collisions_per_episode"]
+        steps = (
+            f"{s['value']:.3f} [{s['lo']:.3f}, {s['hi']:.3f}]"
+            if math.isfinite(s["value"])
+            else "none (no capture)"
+        )
         lines.append(
-            f"| {r['pursuers']} | {r['evader']} | {s['value']:.3f} [{s['lo']:.3f}, {s['hi']:.3f}]"
+            f"| {r['pursuers']} | {r['evader']} | {steps}"
             f" | {100 * c['value']:.1f}% | {k['value']:.4f} [{k['lo']:.4f}, {k['hi']:.4f}] |"
         )
     return "\n".join(lines)
 
 
 # ---------------------------------------------------------------------- command line
+
+STATUS_WIDTH = 20
+"""The most characters of a status beside the count: more would push a bar past 80
+columns, where it is cut."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -119,7 +158,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--policy",
         choices=["trained", *PURSUER_POLICIES],
-        help="the pursuers as a named policy (same as --pursuers NAME; trained: RUN)",
+        help="the pursuers as a named policy (same as --pursuers NAME; trained: RUN)"
+        " (default: trained)",
     )
     p.add_argument(
         "--reference",
@@ -128,13 +168,33 @@ def build_parser() -> argparse.ArgumentParser:
         " optimum, in physics with discrete moves played in the arena; under continuous"
         " control the pursuit policy, played)",
     )
-    p.add_argument("--cross-play", action="store_true", help="every pursuers × evader pairing")
-    p.add_argument("--episodes", type=int_range(1, 100_000_000), default=1000)
+    p.add_argument(
+        "--cross-play",
+        action="store_true",
+        help="every pursuers × evader pairing, as a table (no reference)",
+    )
+    p.add_argument(
+        "--episodes",
+        type=int_range(1, 100_000_000),
+        default=1000,
+        help="episodes to play (with --cross-play: per pairing; a played reference plays as many)",
+    )
     p.add_argument("--greedy", action="store_true", help="most probable action, no sampling")
-    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument(
+        "--seed",
+        type=SEED,
+        default=0,
+        help="seed of the games and of the policies' sampling (default: %(default)s)",
+    )
     p.add_argument("--num-envs", type=int_range(1, 65_536), default=16, help="games at once")
     add_scenario_options(p, train=False, scenario_help="the scenario (default: the run's own)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress bar or lines on stderr (as A2CM_PROGRESS=0)",
+    )
+    add_render_options(p)
     return p
 
 
@@ -151,27 +211,59 @@ def _pursuers_spec(args: argparse.Namespace) -> str:
     return spec
 
 
+def _runs(specs: Sequence[str | None]) -> list[str]:
+    """The run directories among ``specs`` (the others name policies)."""
+    return [s for s in specs if s and not (is_named(s, "pursuers") or is_named(s, "evader"))]
+
+
 def _scenario(args: argparse.Namespace, specs: Sequence[str | None]) -> Scenario:
     if args.set and not args.scenario:
-        raise ConfigError("--set: needs --scenario (a trained run's scenario is fixed)")
+        raise ConfigError(_set_needs_scenario(args.set, _runs(specs)))
     if args.scenario:
         return scenario_from_args(args, train=False)
-    for spec in specs:  # the first run among the policies names the game
-        if spec and not (is_named(spec, "pursuers") or is_named(spec, "evader")):
-            return load_trained_run(spec).scenario
+    from ..analysis.policies import exported_scenario
+    from ..training.runs import load_trained_run
+
+    runs = _runs(specs)
+    if runs:  # the first run (or exported team) among the policies names the game
+        exported = exported_scenario(runs[0])
+        return exported if exported is not None else load_trained_run(runs[0]).scenario
     raise ConfigError("named policies need --scenario (or a run directory)")
 
 
+def _set_needs_scenario(items: Sequence[str], runs: Sequence[str]) -> str:
+    """Why ``--set`` without ``--scenario`` is refused, with the command line that works."""
+    from ..training.runs import run_identity
+
+    name = "NAME"
+    if runs:
+        with contextlib.suppress(ConfigError):  # no run there: --scenario's error says so
+            name = run_identity(runs[0]).scenario
+    sets = " ".join(f"--set {item}" for item in items)
+    return (
+        f"--set needs --scenario: a trained run is evaluated in its own scenario unless"
+        f" --scenario names one; write --scenario {name} {sets}"
+    )
+
+
 def _main(argv: Sequence[str]) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    check_render(args, parser)
     if args.cross_play:
         return _cross_play(args)
+    from ..analysis.evaluation import play, reference_policy, reference_report
+    from ..analysis.policies import matchup
+    from ..base.progress import Progress
+
+    show = not args.no_progress
     pursuers = _pursuers_spec(args)
     scenario = _scenario(args, [pursuers, args.evader])
-    game = matchup(scenario, pursuers, args.evader, greedy=args.greedy)
-    result = play(
-        game.scenario, game.pursuers, args.episodes, args.num_envs, args.seed, game.evader
-    )
+    game = matchup(scenario, pursuers, args.evader, greedy=args.greedy, progress=show)
+    with Progress("evaluate", args.episodes, "ep", enabled=show) as bar:
+        result = play(
+            game.scenario, game.pursuers, args.episodes, args.num_envs, args.seed, game.evader, bar
+        )
     report: dict[str, Any] = {
         "scenario": scenario.name,
         "policy": game.label,
@@ -180,30 +272,53 @@ def _main(argv: Sequence[str]) -> int:
     reference = args.reference or reference_policy(scenario)
     if game.evader is None and pursuers != reference:
         report["reference"] = reference_report(
-            game.scenario, reference, args.episodes, args.num_envs, args.seed
+            game.scenario, reference, args.episodes, args.num_envs, args.seed, show
         )
     if args.json:
+        if args.render:
+            report["pictures"] = list(draw_episodes(args, game, pursuers))
         print(json.dumps(report, indent=2))
-    else:
-        print(format_report(report, f"{scenario.name}: {game.label}, seed {args.seed}"))
+        return 0
+    print(format_report(report, f"{scenario.name}: {game.label}, seed {args.seed}"), flush=True)
+    for picture in draw_episodes(args, game, pursuers) if args.render else ():
+        ending = f": {picture['ending']}" if picture["ending"] else ""
+        print(f"wrote {picture['file']} (episode {picture['episode']}, {picture['length']}"
+              f" steps{ending})", flush=True)  # fmt: skip
     return 0
 
 
 def _cross_play(args: argparse.Namespace) -> int:
+    from ..analysis.evaluation import play
+    from ..analysis.policies import matchup
+    from ..base.progress import Progress
+
+    show = not args.no_progress
     pursuers = [s.strip() for s in _pursuers_spec(args).split(",") if s.strip()]
     evaders = [s.strip() for s in (args.evader or "").split(",") if s.strip()] or [None]
     scenario = _scenario(args, [*pursuers, *evaders])
     games: list[tuple[str, str, Matchup]] = [
-        (p, e or scenario.evader, matchup(scenario, p, e, greedy=args.greedy))
+        (p, e or scenario.evader, matchup(scenario, p, e, greedy=args.greedy, progress=show))
         for p in pursuers
         for e in evaders
     ]
     rows = []
-    for p, e, game in games:
-        result = play(
-            game.scenario, game.pursuers, args.episodes, args.num_envs, args.seed, game.evader
-        )
-        rows.append({"pursuers": p, "evader": e, **result.report(args.seed)})
+    total = len(games) * args.episodes
+    with Progress("cross-play", total, "ep", enabled=show) as bar:
+        for i, (p, e, game) in enumerate(games, 1):
+            status = f"{i}/{len(games)} {Path(p).name} vs {Path(e).name}"
+            if len(status) > STATUS_WIDTH:
+                status = f"pairing {i}/{len(games)}"
+            result = play(
+                game.scenario,
+                game.pursuers,
+                args.episodes,
+                args.num_envs,
+                args.seed,
+                game.evader,
+                progress=bar,
+                status=status,
+            )
+            rows.append({"pursuers": p, "evader": e, **result.report(args.seed)})
     print(json.dumps(rows, indent=2) if args.json else format_cross_play(rows))
     return 0
 

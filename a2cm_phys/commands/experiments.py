@@ -35,10 +35,10 @@ import sys
 import time
 from collections.abc import Sequence
 from datetime import datetime
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from ..config import CONTROL_DEFAULTS, FLEE_DEFAULTS, ConfigError, load_train
-from ..study.launch import run_all
 from ..study.report.plan import (
     ALGOS,
     EXPERIMENTS,
@@ -51,58 +51,111 @@ from ..study.report.plan import (
     plan,
     time_cells,
 )
-from ..study.results import Outcome
-from .options import Parser, check_device, int_range, run_cli, split_assignments, writable_dir
+from .options import (
+    ASSIGNMENT,
+    Parser,
+    UsageError,
+    check_device,
+    int_range,
+    run_cli,
+    split_assignments,
+    writable_dir,
+)
 from .sweep import parse_seeds
 
+if TYPE_CHECKING:  # the launcher (torch, ray) is imported once the options are parsed
+    from ..study.results import Outcome
+    from ..study.runspec import RunSpec
+
 __all__ = ["ALGOS", "EXPERIMENTS", "GROUPS", "build_parser", "main"]
+
+
+_SET_FLAGS = (
+    ("--set", "every group: train.KEY=VALUE"),
+    ("--cont-set", "continuous runs: train.KEY=VALUE or a scenario KEY=VALUE"),
+    ("--selfplay-set", "self-play runs: train.KEY=VALUE"),
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m a2cm_phys.experiments`` argument parser."""
     p = Parser(prog="python -m a2cm_phys.experiments", description=__doc__.split("\n")[0])
-    p.add_argument("--groups", default=",".join(GROUPS), help=f"comma-separated: {GROUPS}")
-    p.add_argument("--seeds", default="0-4", help="e.g. 0-4 or 1,3,7 (every group)")
-    p.add_argument("--modes", default="grid,physics", help="modes of the paper's experiments")
     p.add_argument(
-        "--updates", type=int_range(1), default=5000, help="paper/ours runs (the paper: 5,000)"
+        "--groups", default=",".join(GROUPS), help=f"comma-separated, of {', '.join(GROUPS)}"
+    )
+    p.add_argument("--seeds", default="0-4", help="e.g. 0-4 or 1,3,7 (every group)")
+    p.add_argument(
+        "--modes", default=",".join(MODES), help="modes of the paper's experiments: grid, physics"
+    )
+    p.add_argument(
+        "--updates",
+        type=int_range(1),
+        default=5000,
+        help="updates of the paper/ours runs (the paper's 5,000 by default)",
     )
     p.add_argument(
         "--cont-updates",
         type=int_range(1),
-        help="continuous runs (default: train's step budget, 2,000,000 at 10 Hz; 4,000,000 flee)",
+        help="updates of the continuous runs (default: train's step budget, 2,000,000 steps"
+        " at 10 Hz; 4,000,000 against the fleeing evader)",
     )
-    p.add_argument("--selfplay-updates", type=int_range(1), default=5000, help="self-play runs")
-    for flag, what in (
-        ("--set", "every group: train.KEY=VALUE"),
-        ("--cont-set", "continuous runs: train.KEY=VALUE or a scenario KEY=VALUE"),
-        ("--selfplay-set", "self-play runs: train.KEY=VALUE"),
-    ):
-        p.add_argument(flag, action="extend", nargs="+", default=[], metavar="KEY=VALUE", help=what)
-    p.add_argument("--eval-episodes", type=int_range(1, 10_000_000), default=2000)
-    p.add_argument("--crossplay-episodes", type=int_range(1, 10_000_000), default=500)
+    p.add_argument(
+        "--selfplay-updates", type=int_range(1), default=5000, help="updates of the self-play runs"
+    )
+    for flag, what in _SET_FLAGS:
+        p.add_argument(
+            flag,
+            action="append",
+            default=[],
+            metavar="KEY=VALUE",
+            help=f"{what}; one pair per flag, repeat the flag for more",
+        )
+    p.add_argument(
+        "--eval-episodes",
+        type=int_range(1, 10_000_000),
+        default=2000,
+        help="greedy episodes evaluating each run's final policy",
+    )
+    p.add_argument(
+        "--crossplay-episodes",
+        type=int_range(1, 10_000_000),
+        default=500,
+        help="episodes per pairing of the self-play cross-play table",
+    )
     p.add_argument(
         "--exploit-max-steps",
         type=int_range(1),
-        help="truncate the evader's exact best response at this horizon (faster; a lower "
-        "bound, said so in the report)",
+        help="truncate the evader's exact best response at this horizon (faster; a lower"
+        " bound, said so in the report; default: the scenario's max_steps, exact)",
     )
     p.add_argument("--no-exploit", action="store_true", help="skip the exact exploitability")
     p.add_argument(
         "--logdir", "--sweep-dir", dest="logdir", default="logs/experiments", help="runs go here"
     )
     p.add_argument("--out", default="docs", help="where RESULTS.md and figures/ go")
-    p.add_argument("--address", help="Ray cluster address")
-    p.add_argument("--sequential", action="store_true", help="no Ray")
+    p.add_argument("--address", help="Ray cluster address (default: start Ray on this machine)")
+    p.add_argument("--sequential", action="store_true", help="no Ray, even if installed")
     p.add_argument("--dry-run", action="store_true", help="list the runs and the estimate; stop")
     p.add_argument("--report-only", action="store_true", help="no training: report what exists")
     p.add_argument(
         "--estimate-updates",
         type=int_range(0),
         default=20,
-        help="updates of the timed short run per cell type (0: no estimate)",
+        help="updates of the timed short run per cell type; 0: no estimate",
     )
     return p
+
+
+def check_one_pair_per_flag(argv: Sequence[str]) -> None:
+    """A :class:`UsageError` for ``--cont-set A=1 B=2`` (the old several-pairs form; the
+    parser refuses it for ``--set``), showing the repeated form."""
+    for flag, _ in _SET_FLAGS[1:]:
+        for i, word in enumerate(argv[:-2]):
+            if word == flag and ASSIGNMENT.match(argv[i + 2]):
+                raise UsageError(
+                    f"{flag} takes one KEY=VALUE per flag: write {flag} {argv[i + 1]}"
+                    f" {flag} {argv[i + 2]} (repeat {flag} for each pair)"
+                )
 
 
 def _given(key: str, value: Any) -> dict[str, Any]:
@@ -160,7 +213,7 @@ def print_plan(
         counts = ", ".join(f"{states.count(s)} {s}" for s in ("new", "partial", "done"))
         if listing:
             for r in mine:
-                print(f"  {group}/{r.spec.name}: {r.state}")
+                print(f"  {group}/{r.run_dir.name}: {r.state}")
         line = f"{group}: {len(mine)} runs ({counts})"
         if estimates:
             serial = sum(
@@ -198,6 +251,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(argv: Sequence[str]) -> int:
+    check_one_pair_per_flag(argv)
     args = build_parser().parse_args(argv)
     start = time.perf_counter()
     groups = check_groups(args.groups)
@@ -221,6 +275,39 @@ def _main(argv: Sequence[str]) -> int:
     errors: dict[str, str] = {}
     use_ray = False
     if not args.report_only:
+        try:
+            use_ray = _train(runs, groups, logdir, args, errors)
+        except KeyboardInterrupt:
+            print(
+                "interrupted: finished runs are kept; run the same command to go on, or"
+                " add --report-only for a report of what exists",
+                file=sys.stderr,
+            )
+            return 130
+    from ..study.report.build import build_report
+
+    meta = _meta(args, argv, use_ray)
+    missing = build_report(runs, errors, out, logdir, meta, start, args, groups, modes)
+    print(f"report: {out / 'RESULTS.md'}")
+    for run, why in missing:
+        print(f"not in the report: {run.cell.group}/{run.run_dir.name}: {why}", file=sys.stderr)
+    return 1 if errors else 0
+
+
+def _train(
+    runs: list[PlannedRun],
+    groups: list[str],
+    logdir: Path,
+    args: argparse.Namespace,
+    errors: dict[str, str],
+) -> bool:
+    """Train the runs, group by group, with their progress (runs done of all, the one
+    going on) on stderr; each failure into ``errors``; whether Ray trained them."""
+    from ..study.launch import run_all
+    from ..study.watch import RunsProgress
+
+    use_ray = False
+    with RunsProgress("runs", len(runs), out=sys.stderr) as progress:
         for group in groups:
             mine = [r for r in runs if r.cell.group == group]
             sweep_dir = logdir / group
@@ -228,22 +315,26 @@ def _main(argv: Sequence[str]) -> int:
 
             def done(o: Outcome, group: str = group) -> None:
                 what = o.summary.get("sweep") if o.summary else f"FAILED ({o.error})"
-                print(f"{group}/{o.spec.name}: {what}", file=sys.stderr, flush=True)
+                progress.finished(f"{group}/{o.spec.name}", f"{group}/{o.name}: {what}")
 
-            try:
-                outcomes, use_ray = run_all(
-                    [r.spec for r in mine], sweep_dir, done, args.address, 1.0, args.sequential
-                )
-            except KeyboardInterrupt:
-                print(
-                    "interrupted: finished runs are kept; run the same command to go on, or"
-                    " add --report-only for a report of what exists",
-                    file=sys.stderr,
-                )
-                return 130
+            def begin(spec: RunSpec, group: str = group) -> None:
+                progress.started(f"{group}/{spec.name}")
+
+            outcomes, use_ray = run_all(
+                [r.spec for r in mine],
+                sweep_dir,
+                done,
+                args.address,
+                1.0,
+                args.sequential,
+                on_start=begin,
+            )
             errors.update({f"{group}/{o.spec.name}": o.error for o in outcomes if o.error})
-    from ..study.report.build import build_report
+    return use_ray
 
+
+def _meta(args: argparse.Namespace, argv: Sequence[str], use_ray: bool) -> dict[str, Any]:
+    """What the report says of this session: its command, date, machine, budgets."""
     continuous = (
         f"{args.cont_updates:,} updates"
         if args.cont_updates
@@ -251,7 +342,7 @@ def _main(argv: Sequence[str]) -> int:
         f" ({FLEE_DEFAULTS['steps']:,} in updates of {FLEE_DEFAULTS['batch_size']} against"
         " the fleeing evader)"
     )
-    meta = {
+    return {
         "command": shlex.join(["python", "-m", "a2cm_phys.experiments", *argv]),
         "date": datetime.now().strftime("%Y-%m-%d"),
         "machine": f"{platform.machine()} {platform.system()}, {os.cpu_count()} cores"
@@ -262,11 +353,6 @@ def _main(argv: Sequence[str]) -> int:
         "budget": f"Updates of 128 steps: {args.updates:,} (paper, ours), "
         f"{args.selfplay_updates:,} (self-play); continuous: {continuous}.",
     }
-    missing = build_report(runs, errors, out, logdir, meta, start, args, groups, modes)
-    print(f"report: {out / 'RESULTS.md'}")
-    for run, why in missing:
-        print(f"not in the report: {run.cell.group}/{run.spec.name}: {why}", file=sys.stderr)
-    return 1 if errors else 0
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -36,8 +37,47 @@ class UsageError(UserError):
     """A command was given something it cannot use; the message names the option or file."""
 
 
+ASSIGNMENT = re.compile(r"^[A-Za-z_][\w.]*=")
+"""What a ``--set`` item looks like: ``KEY=VALUE`` (a dotted key)."""
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Help that ends each option with its default, where it has one worth showing (not
+    ``None``, a flag's ``False`` or an empty list: their help says what happens)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        shown = not (
+            default is None
+            or default is False
+            or default == []
+            or default == argparse.SUPPRESS
+            or isinstance(action, argparse._HelpAction)
+        )
+        if shown and "%(default)" not in text and "default" not in text:
+            text += " (default: %(default)s)"
+        return text
+
+
 class Parser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` that raises :class:`UsageError` rather than exiting."""
+    """An ``ArgumentParser`` that raises :class:`UsageError` rather than exiting, shows
+    each option's default in ``--help``, and takes one ``KEY=VALUE`` per ``--set``."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def parse_known_args(self, args: Sequence[str] | None = None, namespace: Any = None) -> Any:
+        """argparse's, after refusing ``--set A=1 B=2`` (the old several-pairs form)."""
+        argv = list(sys.argv[1:] if args is None else args)
+        for i, word in enumerate(argv[:-2]):
+            if word == "--set" and ASSIGNMENT.match(argv[i + 2]):
+                raise UsageError(
+                    f"--set takes one KEY=VALUE per flag: write --set {argv[i + 1]}"
+                    f" --set {argv[i + 2]} (repeat --set for each pair)"
+                )
+        return super().parse_known_args(argv, namespace)
 
     def error(self, message: str) -> NoReturn:
         """Called by argparse on a bad command line."""
@@ -195,11 +235,11 @@ def add_scenario_options(
     what = "scenario key, or train.KEY for a training option" if train else "scenario key"
     parser.add_argument(
         "--set",
-        action="extend",
-        nargs="+",
+        action="append",
         default=[],
         metavar="KEY=VALUE",
-        help=f"override a {what} (one or more, repeatable; values are TOML: -2, flee, true)",
+        help=f"override a {what}; one pair per flag, repeat the flag for more"
+        " (values are TOML: -2, flee, true)",
     )
     if train:
         from ..config import PRESETS
@@ -207,7 +247,8 @@ def add_scenario_options(
         parser.add_argument(
             "--preset",
             metavar="NAME",
-            help=f"a named set of training options ({', '.join(PRESETS)}); explicit options win",
+            help=f"a named set of training options ({', '.join(PRESETS)}); explicit options win"
+            " (default: none, this project's own defaults)",
         )
 
 

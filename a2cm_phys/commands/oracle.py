@@ -15,39 +15,27 @@ evaluations and replays can put learned policies next to it.
 
 ``--best-response evader|pursuers`` solves one team's exact best response to the other's
 fixed policy (:mod:`a2cm_phys.solve.best_response`); ``--game-value`` brackets the game's
-value when both teams play their best (:mod:`a2cm_phys.solve.nash`).
+value when both teams play their best (:mod:`a2cm_phys.solve.nash`). ``--pursuers`` and
+``--evader`` take the names ``evaluate`` takes (:mod:`a2cm_phys.analysis.names`), meaning the
+same policies; ``--evader best-response``, the one name without a table, says why.
+
+The solvers report their iterations and residual on stderr while they run (a bar on a
+terminal, a line every 30 s elsewhere; ``--no-progress`` or ``A2CM_PROGRESS=0`` silences
+them); the results go to stdout. The solvers are imported once the options are parsed, so
+``--help`` is quick.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from ..analysis.names import EVADER_TABLES, PURSUER_TABLES
-from ..analysis.sources import (
-    SourceError,
-    evader_source,
-    pursuer_source,
-    run_scenario,
-)
 from ..config import SCRIPTED_EVADERS, Scenario, build, merge_overrides, to_dict
-from ..solve import TooLargeError, UnsupportedError
-from ..solve.best_response import (
-    TOLERANCE,
-    BestResponse,
-    Outcome,
-    evader_best_response,
-    evaluate_tables,
-    pursuers_best_response,
-)
-from ..solve.cache import OracleSolution, load_or_solve, load_or_solve_value
-from ..solve.minimax import MinimaxBounds, minimax_bounds
-from ..solve.pursuer_step import check_size
-from ..solve.tables import uniform_table
 from .options import (
     Parser,
     UsageError,
@@ -59,13 +47,22 @@ from .options import (
     writable_dir,
 )
 
-if TYPE_CHECKING:  # the solver imports torch: only when --game-value asks for it
+if TYPE_CHECKING:  # the solvers (numpy arrays, torch) are imported after parsing
+    from ..solve.best_response import BestResponse, Outcome
+    from ..solve.cache import OracleSolution
+    from ..solve.minimax import MinimaxBounds
     from ..solve.nash import GameValue
+
+TOLERANCE = 1e-9
+"""``--tol``'s default: :data:`a2cm_phys.solve.best_response.TOLERANCE` (a test keeps them
+equal; the solvers are not imported for ``--help``)."""
 
 # --------------------------------------------------------------------------- command
 
 
 def _report(sol: OracleSolution) -> str:
+    import numpy as np
+
     sc, meta = sol.scenario, sol.meta
     start = sol.start_positions()
     dist = sol.distribution()
@@ -203,20 +200,24 @@ def _value_report(sc: Scenario, value: GameValue, bounds: MinimaxBounds) -> str:
     )
 
 
-def _game_value(args) -> int:
+def _game_value(args: argparse.Namespace) -> int:
     """``--game-value``: solve, print, exit status."""
+    from ..solve.cache import load_or_solve_value
+    from ..solve.minimax import minimax_bounds
+
     args.scenario = args.scenario or "grid"
     sc = scenario_from_args(args, train=False)
-    try:
-        value = load_or_solve_value(sc, args.cache_dir, use_cache=not args.no_cache)
-        print(_value_report(sc, value, minimax_bounds(sc)))
-    except (TooLargeError, UnsupportedError) as err:
-        raise UsageError(str(err)) from None
+    shown = not args.no_progress
+    with _solver_errors():
+        value = load_or_solve_value(sc, args.cache_dir, not args.no_cache, progress=shown)
+        print(_value_report(sc, value, minimax_bounds(sc, progress=shown)))
     return 0
 
 
-def _best_response_scenario(args) -> Scenario:
+def _best_response_scenario(args: argparse.Namespace) -> Scenario:
     """``--scenario`` with ``--set``; without ``--scenario``, a run directory's own."""
+    from ..analysis.sources import run_scenario
+
     names = PURSUER_TABLES if args.best_response == "evader" else EVADER_TABLES
     spec = args.pursuers if args.best_response == "evader" else args.evader
     if args.scenario is None and spec is not None and spec not in names:
@@ -229,18 +230,29 @@ def _best_response_scenario(args) -> Scenario:
     return scenario_from_args(args, train=False)
 
 
-def _best_response(args) -> int:
+def _best_response(args: argparse.Namespace) -> int:
     """``--best-response evader|pursuers``: solve, print, exit status."""
-    cache = {"cache_dir": args.cache_dir, "use_cache": not args.no_cache}
-    try:
+    from ..analysis.sources import evader_source, pursuer_source
+    from ..solve.best_response import (
+        evader_best_response,
+        evaluate_tables,
+        pursuers_best_response,
+    )
+    from ..solve.minimax import MinimaxBounds
+    from ..solve.pursuer_step import check_size
+    from ..solve.tables import uniform_table
+
+    shown = not args.no_progress
+    cache = {"cache_dir": args.cache_dir, "use_cache": not args.no_cache, "progress": shown}
+    with _solver_errors():
         sc = _best_response_scenario(args)
         if args.best_response == "evader":
             spec = args.pursuers or "oracle"
-            kinds = {"oracle": "deterministic", "minimax": "deterministic", "random": "product"}
-            check_size(sc, kinds.get(spec, "general"))
+            check_size(sc, _TABLE_KINDS.get(spec, "general"))
             source = pursuer_source(sc, spec, **cache)
-            br = evader_best_response(sc, source.table, args.tol)
-            random = evaluate_tables(sc, source.table, uniform_table(sc, 1), args.tol)
+            br = evader_best_response(sc, source.table, args.tol, progress=shown)
+            random_evader = uniform_table(sc, 1)
+            random = evaluate_tables(sc, source.table, random_evader, args.tol, progress=shown)
             print(_evader_report(sc, source.label, br, random))
             if isinstance(source.solution, MinimaxBounds):
                 print(_bounds_report(source.solution))
@@ -251,11 +263,33 @@ def _best_response(args) -> int:
         check_size(sc, "deterministic")
         source = evader_source(sc, spec, **cache)
         solved = None if source.solution is None else source.solution.policy
-        br = pursuers_best_response(sc, source.table, args.tol, joint_policy=solved)
+        br = pursuers_best_response(sc, source.table, args.tol, joint_policy=solved, progress=shown)
         print(_pursuers_report(sc, source.label, br))
         return 0
-    except (TooLargeError, UnsupportedError, SourceError) as err:
-        raise UsageError(str(err)) from None
+
+
+_TABLE_KINDS = {
+    "random": "product",
+    "pursuit": "deterministic",
+    "oracle": "deterministic",
+    "minimax": "deterministic",
+}
+"""The kind of each named pursuer table (:func:`~a2cm_phys.solve.pursuer_step.check_size`:
+how large an arena its best response can take); a run's actors are "general"."""
+
+
+@contextmanager
+def _solver_errors() -> Iterator[None]:
+    """Turns the solvers' and the sources' refusals into a one-line :class:`UsageError`."""
+    try:
+        yield
+    except Exception as err:
+        from ..analysis.sources import SourceError
+        from ..solve import TooLargeError, UnsupportedError
+
+        if isinstance(err, (TooLargeError, UnsupportedError, SourceError)):
+            raise UsageError(str(err)) from None
+        raise
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -263,18 +297,35 @@ def main(argv: Sequence[str] | None = None) -> int:
     return run_cli(_main, argv)
 
 
-def _main(argv: Sequence[str]) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The ``python -m a2cm_phys.oracle`` argument parser."""
     parser = Parser(
         prog="python -m a2cm_phys.oracle",
         description="Exact optimal pursuit policy of a grid scenario (value iteration).",
     )
-    add_scenario_options(parser, default=None, train=False)
-    parser.add_argument("--cache-dir", type=Path, default=None, help="cache directory")
-    parser.add_argument("--no-cache", action="store_true", help="neither read nor write cache")
+    add_scenario_options(
+        parser,
+        default=None,
+        train=False,
+        scenario_help="scenario name (see a2cm_phys/scenarios/) or path to a TOML file"
+        " (default: grid; with --best-response and a run directory, the run's scenario)",
+    )
+    parser.add_argument(
+        "--cache-dir",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="where solutions are cached (default: $XDG_CACHE_HOME/a2cm_phys/oracle,"
+        " ~/.cache/a2cm_phys/oracle without XDG_CACHE_HOME)",
+    )
+    parser.add_argument(
+        "--no-cache", action="store_true", help="neither read nor write the cache: solve again"
+    )
     parser.add_argument(
         "--best-response",
         choices=["evader", "pursuers"],
-        help="solve that team's exact best response to the other team's fixed policy",
+        help="solve that team's exact best response to the other team's fixed policy"
+        " (default: neither; the oracle's optimum against the scenario's evader)",
     )
     parser.add_argument(
         "--game-value",
@@ -284,23 +335,34 @@ def _main(argv: Sequence[str]) -> int:
     )
     parser.add_argument(
         "--pursuers",
-        metavar="random|oracle|minimax|RUN_DIR",
-        help="with --best-response evader: the pursuers' policy (default oracle; minimax:"
-        " the team optimal when the evader sees its move, with bounds on the game's value)",
+        metavar="|".join((*PURSUER_TABLES, "RUN_DIR")),
+        help="with --best-response evader: the pursuers' policy, as evaluate's --pursuers"
+        " (default: oracle, the team optimal against the scenario's scripted evader, the"
+        " random one where it is learned; minimax: the team optimal when the evader sees"
+        " its move, with bounds on the game's value)",
     )
     parser.add_argument(
         "--evader",
-        metavar="random|flee|static|equilibrium|RUN_DIR",
-        help="with --best-response pursuers: the evader's policy (default the scenario's;"
-        " equilibrium: the game's, see --game-value)",
+        metavar="|".join((*EVADER_TABLES, "RUN_DIR")),
+        help="with --best-response pursuers: the evader's policy, as evaluate's --evader"
+        " (default: the scenario's; equilibrium: the game's, see --game-value)",
     )
     parser.add_argument(
         "--tol",
         type=positive_float,
         default=TOLERANCE,
-        help=f"error bound that stops the backward induction early (default {TOLERANCE:g})",
+        help="error bound that stops the backward induction early, in steps",
     )
-    args = parser.parse_args(argv)
+    parser.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress bar or lines on stderr while the solvers run",
+    )
+    return parser
+
+
+def _main(argv: Sequence[str]) -> int:
+    args = build_parser().parse_args(argv)
     if args.cache_dir is not None and not args.no_cache:
         writable_dir(args.cache_dir, "--cache-dir")
     if args.pursuers is not None and args.best_response != "evader":
@@ -313,12 +375,14 @@ def _main(argv: Sequence[str]) -> int:
         return _game_value(args)
     if args.best_response:
         return _best_response(args)
+    from ..solve.cache import load_or_solve
+
     args.scenario = args.scenario or "grid"
     scenario = scenario_from_args(args, train=False)
-    try:
-        sol = load_or_solve(scenario, args.cache_dir, use_cache=not args.no_cache)
-    except (TooLargeError, UnsupportedError) as err:
-        raise UsageError(str(err)) from None
+    with _solver_errors():
+        sol = load_or_solve(
+            scenario, args.cache_dir, not args.no_cache, progress=not args.no_progress
+        )
     print(_report(sol))
     return 0
 

@@ -4,8 +4,9 @@ one after another without Ray).
     python -m a2cm_phys.sweep --scenarios grid,grid_collision --algos a2c,a2cm --seeds 0-4
 
 Parses the options into run specs and prints each run's fate and the summary table; the
-sweep itself (reuse of finished runs, the runs' locks, retries, stopping on a signal) is
-:mod:`a2cm_phys.study.launch`.
+sweep itself (reuse of finished runs, found by their configuration, the runs' locks,
+retries, stopping on a signal) is :mod:`a2cm_phys.study.launch`. A run's directory is
+``<logdir>/<scenario>-<algo>[-<preset>]-s<seed>/``.
 """
 
 from __future__ import annotations
@@ -16,18 +17,12 @@ import sys
 from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from ..config import (
-    ConfigError,
-    load_scenario,
-)
-from ..study.launch import run_all
-from ..study.results import Outcome, format_table, summarise, write_summary
-from ..study.rundirs import check_reusable
-from ..study.runspec import RunSpec
-from ..study.stopping import stop_signals
+from ..config import ConfigError, load_scenario
 from .options import (
     Parser,
+    UsageError,
     add_logdir,
     add_scenario_options,
     check_device,
@@ -38,6 +33,9 @@ from .options import (
     train_values,
     writable_dir,
 )
+
+if TYPE_CHECKING:  # the study's modules (torch, ray) are imported once the options are parsed
+    from ..study.runspec import RunSpec
 
 _MAX_SEEDS = 10_000
 
@@ -79,25 +77,57 @@ def _names(text: str, option: str) -> list[str]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m a2cm_phys.sweep`` argument parser."""
-    p = Parser(prog="python -m a2cm_phys.sweep", description=__doc__.split("\n")[0])
-    p.add_argument("--scenarios", required=True, help="comma-separated scenario names or paths")
+    p = Parser(
+        prog="python -m a2cm_phys.sweep",
+        description="Scenarios × algorithms × seeds, each run a Ray task (or one after another"
+        " without Ray);\nfinished runs are found by their configuration and skipped.",
+    )
+    p.add_argument(
+        "--scenarios", required=True, help="comma-separated scenario names or TOML paths"
+    )
     p.add_argument("--algos", default="a2c,a2cm", help="comma-separated: a2c, a2cm")
+    p.add_argument(
+        "--live",
+        nargs="?",
+        const="",
+        metavar="[HOST:]PORT",
+        help="refused: a sweep's runs are many; watch one with train --live (default: off)",
+    )
     p.add_argument("--seeds", default="0-4", help="e.g. 0-4 or 1,3,7")
+    p.add_argument(
+        "--updates",
+        type=int_range(1),
+        help="gradient updates of each run (default: 5000; continuous control: 2,000,000"
+        " steps' worth, 4,000,000 against the fleeing evader)",
+    )
     add_logdir(p, "logs/sweep", "where the run directories go (--sweep-dir: the old spelling)")
-    p.add_argument("--address", help="Ray cluster address (auto, ray://host:10001)")
-    p.add_argument("--cpus-per-run", type=positive_float, default=1.0)
+    p.add_argument(
+        "--address",
+        help="Ray cluster address: auto, ray://host:10001 (default: start Ray on this machine)",
+    )
+    p.add_argument(
+        "--cpus-per-run", type=positive_float, default=1.0, help="CPUs Ray gives each run"
+    )
     p.add_argument("--sequential", action="store_true", help="no Ray, even if installed")
     add_scenario_options(p, scenario=False)
     p.add_argument("--no-record", action="store_true", help="no MCAP episode logs")
-    p.add_argument("--log-every", type=int_range(0), default=1)
+    p.add_argument(
+        "--log-every",
+        type=int_range(0),
+        default=1,
+        help="log every K-th episode's trajectory; 0: none",
+    )
     return p
 
 
 def plan(args: argparse.Namespace) -> list[RunSpec]:
     """The runs of a sweep, validated (also against the run directories already in
-    ``--logdir``) before anything starts."""
+    ``--logdir``, found by their configuration) before anything starts."""
+    from ..study.rundirs import check_reusable, existing_runs, find_run
+    from ..study.runspec import RunSpec
+
     overrides, _ = split_assignments(args.set)
-    train = train_values(args)
+    train = train_values(args, {"updates": args.updates})
     scenarios = _names(args.scenarios, "--scenarios")
     algos = _names(args.algos, "--algos")
     seeds = parse_seeds(args.seeds)
@@ -107,7 +137,14 @@ def plan(args: argparse.Namespace) -> list[RunSpec]:
         for algo in algos:
             for seed in seeds:
                 spec = RunSpec(
-                    scenario, algo, seed, train, overrides, not args.no_record, args.log_every
+                    scenario,
+                    algo,
+                    seed,
+                    train,
+                    overrides,
+                    not args.no_record,
+                    args.log_every,
+                    args.preset,
                 )
                 _, cfg = spec.resolve()
                 if spec.name in names:
@@ -119,8 +156,9 @@ def plan(args: argparse.Namespace) -> list[RunSpec]:
                 specs.append(spec)
     check_device(cfg.device)
     sweep_dir = writable_dir(args.logdir, "--logdir")  # refuses '' and links to nothing
+    existing = existing_runs(sweep_dir)
     for spec in specs:
-        check_reusable(spec, sweep_dir)
+        check_reusable(spec, find_run(spec, sweep_dir, existing))
     return specs
 
 
@@ -131,6 +169,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _main(argv: Sequence[str]) -> int:
     args = build_parser().parse_args(argv)
+    if args.live is not None:
+        raise UsageError(
+            "--live: a sweep trains many runs, and a live view shows one; train one run"
+            " with python -m a2cm_phys.train --scenario NAME --live, or open a finished"
+            " run's log in Foxglove (replay RUN --serve)"
+        )
+    from ..study.stopping import stop_signals
+
     with stop_signals() as received:
         try:
             return _sweep(args)
@@ -145,33 +191,37 @@ def _main(argv: Sequence[str]) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
+    from ..study.launch import run_all
+    from ..study.results import Outcome, format_table, summarise, write_summary
+    from ..study.watch import RunsProgress
+
     specs = plan(args)
     sweep_dir = Path(args.logdir)
     sweep_dir.mkdir(parents=True, exist_ok=True)
-    from tqdm import tqdm
+    with RunsProgress("sweep", len(specs)) as progress:
 
-    bar = tqdm(total=len(specs), desc="runs", unit="run", disable=None)
+        def on_done(o: Outcome) -> None:
+            progress.finished(o.spec.name, f"{o.name}: {o.describe()}")
 
-    def on_done(o: Outcome) -> None:
-        bar.write(f"{o.spec.name}: {o.describe()}")
-        bar.update()
-
-    try:
         outcomes, _ = run_all(
-            specs, sweep_dir, on_done, args.address, args.cpus_per_run, args.sequential
+            specs,
+            sweep_dir,
+            on_done,
+            args.address,
+            args.cpus_per_run,
+            args.sequential,
+            on_start=lambda spec: progress.started(spec.name),
         )
-    finally:
-        bar.close()
     rows = summarise(outcomes)
     written = write_summary(rows, outcomes, sweep_dir)
     if rows:
         print(format_table(rows))
     failed = [o for o in outcomes if o.error]
     for o in failed:
-        print(f"FAILED {o.spec.name} after {o.attempts} attempts: {o.error}", file=sys.stderr)
+        print(f"FAILED {o.name} after {o.attempts} attempts: {o.error}", file=sys.stderr)
     for o in outcomes:
         if o.busy is not None:
-            print(f"BUSY {o.spec.name}: {o.busy}; not run", file=sys.stderr)
+            print(f"BUSY {o.name}: {o.busy}; not run", file=sys.stderr)
     print(f"summary: {', '.join(str(p) for p in written)}")
     if failed and len(failed) == len(outcomes):
         print(f"error: every run failed ({len(failed)} of {len(outcomes)})", file=sys.stderr)

@@ -1,7 +1,8 @@
 """``python -m a2cm_phys.train --scenario grid``: train A2C or A2CM on a scenario.
 
-Parses the options, claims the run directory (a new one under ``--logdir``, ``--run-dir``,
-or ``--resume RUN_DIR``: :mod:`a2cm_phys.training.rundir`, its lock held for the session),
+Parses the options, claims the run directory (a new one under ``--logdir`` named
+``<scenario>-<algo>[-<preset>]-s<seed>-<time>``, ``--run-dir``, or ``--resume RUN_DIR``:
+:mod:`a2cm_phys.training.rundir`, its lock held for the session),
 hands over to :class:`a2cm_phys.training.trainer.Trainer` and prints the summary and how
 the session ended, with the command that resumes it (exit statuses:
 :mod:`a2cm_phys.base.exitcodes`). What a run directory holds and why nothing is lost:
@@ -17,12 +18,11 @@ import signal
 import sys
 from collections.abc import Sequence
 from contextlib import ExitStack
-from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..base.exitcodes import EXIT_INTERRUPTED, EXIT_NO_SPACE, EXIT_NONFINITE, EXIT_WORKER_DIED
-from ..config import Scenario, Train, resolve_train
+from ..config import Train, resolve_train
 from ..training.rundir import (
     CHECKPOINT_NAME,
     CONFIG_NAME,
@@ -30,13 +30,12 @@ from ..training.rundir import (
     LOG_PART,
     RUN_FILES,
     append_session,
+    make_run_dir,
     remove_stray_temps,
     run_lock,
     write_config,
 )
 from ..training.rundir import PREVIOUS_CHECKPOINT_NAME as PREVIOUS_NAME
-from ..training.seeding import policy_rng
-from ..training.trainer import Trainer
 from .options import (
     SEED,
     Parser,
@@ -49,15 +48,18 @@ from .options import (
     writable_dir,
 )
 
+if TYPE_CHECKING:  # the trainer (torch) is imported once the options are parsed
+    from ..config import Scenario
+    from ..training.live import LiveView
+    from ..training.trainer import Trainer
+
 __all__ = [
     "EXIT_INTERRUPTED",
     "EXIT_NONFINITE",
     "EXIT_NO_SPACE",
     "EXIT_WORKER_DIED",
-    "Trainer",
     "build_parser",
     "main",
-    "policy_rng",
 ]
 
 # ---------------------------------------------------------------------- command line
@@ -77,58 +79,102 @@ def build_parser() -> argparse.ArgumentParser:
         prog="python -m a2cm_phys.train",
         description="Train A2CM (one shared critic) or A2C (N actor-critic pairs).",
     )
-    add_scenario_options(p)
-    p.add_argument("--algo", choices=["a2cm", "a2c"])
-    p.add_argument("--num-envs", type=_COUNT, help="parallel games (1 = the paper's setting)")
+    add_scenario_options(
+        p,
+        scenario_help="scenario name (see a2cm_phys/scenarios/) or path to a TOML file"
+        " (no default: required unless --resume)",
+    )
+    _add_train_flags(p)
+    _add_run_flags(p)
+    return p
+
+
+def _add_train_flags(p: argparse.ArgumentParser) -> None:
+    """The training options that have a flag of their own (the rest: ``--set train.KEY``)."""
+    d = Train()
+    p.add_argument("--algo", choices=["a2cm", "a2c"], help=f"the learner (default: {d.algo})")
+    p.add_argument(
+        "--num-envs",
+        type=_COUNT,
+        help=f"parallel games (default: {d.num_envs}; --preset paper: 1, the paper's setting)",
+    )
     p.add_argument(
         "--updates",
         type=_COUNT,
-        help="gradient updates (5000; continuous control: 2,000,000 steps' worth, 4,000,000 flee)",
+        help="gradient updates (default: 5000; continuous control: 2,000,000 steps' worth,"
+        " 4,000,000 against the fleeing evader)",
     )
     p.add_argument(
         "--batch-size",
         type=_COUNT,
-        help="steps per update over all games (128; continuous, fleeing evader: 512)",
+        help="steps per update over all games (default: 128; continuous control against"
+        " the fleeing evader: 512)",
     )
-    p.add_argument("--seed", type=SEED)
-    p.add_argument("--lr", type=float)
-    p.add_argument("--reward-scale", type=float)
+    p.add_argument("--seed", type=SEED, help=f"the run's seed (default: {d.seed})")
+    p.add_argument("--lr", type=float, help=f"learning rate (default: {d.lr:g})")
     p.add_argument(
-        "--max-grad-norm", type=float, help="0 disables clipping (0; continuous control: 0.5)"
+        "--reward-scale",
+        type=float,
+        help=f"rewards are multiplied by this before learning (default: {d.reward_scale:g})",
     )
-    p.add_argument("--device", help="torch device: cpu (default), cuda, cuda:1, mps")
-    p.add_argument("--threads", type=_COUNT, help="torch threads (default 1)")
-    p.add_argument("--workers", type=_COUNT, help="physics: processes stepping the games (1)")
-    p.add_argument("--logdir", default="logs", help="parent folder of run directories")
-    p.add_argument("--run-dir", help="exact run directory (instead of one under --logdir)")
-    p.add_argument("--resume", metavar="RUN_DIR", help="continue a run (--updates may extend it)")
     p.add_argument(
-        "--log-every", type=_EVERY, help="log every K-th episode's trajectory (1; 0: none)"
+        "--max-grad-norm",
+        type=float,
+        help="gradient clipping; 0 disables it (default: 0; continuous control: 0.5)",
     )
-    p.add_argument("--scene-every", type=_EVERY, help="Foxglove scenes every K episodes (0: off)")
+    p.add_argument("--device", help=f"torch device: cpu, cuda, cuda:1, mps (default: {d.device})")
+    p.add_argument("--threads", type=_COUNT, help=f"torch threads (default: {d.threads})")
+    p.add_argument(
+        "--workers",
+        type=_COUNT,
+        help=f"physics: processes stepping the games (default: {d.workers})",
+    )
+
+
+def _add_run_flags(p: argparse.ArgumentParser) -> None:
+    """Where the run goes, what it logs, how it shows its progress."""
+    p.add_argument(
+        "--logdir",
+        default="logs",
+        help="parent folder of new run directories, named SCENARIO-ALGO[-PRESET]-sSEED-TIME",
+    )
+    p.add_argument(
+        "--run-dir",
+        help="exact run directory, instead of a new one under --logdir (default: none)",
+    )
+    p.add_argument(
+        "--resume",
+        metavar="RUN_DIR",
+        help="continue a run; --updates may extend it (default: none, a new run)",
+    )
+    p.add_argument(
+        "--log-every",
+        type=_EVERY,
+        help="log every K-th episode's trajectory; 0: none (default: 1; a resumed run: its own)",
+    )
+    p.add_argument(
+        "--scene-every",
+        type=_EVERY,
+        help="Foxglove scenes every K episodes; 0: off (default: 0; a resumed run: its own)",
+    )
     p.add_argument("--no-record", action="store_true", help="no MCAP episode log")
-    p.add_argument("--checkpoint-every", type=_EVERY, default=0, help="also save every K updates")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    return p
-
-
-def make_run_dir(logdir: str | Path, scenario: Scenario, cfg: Train) -> Path:
-    """Create ``<logdir>/<scenario>-<algo>-s<seed>-<YYYYmmdd-HHMMSS>[-k]/`` and return it."""
-    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    logdir = Path(logdir)
-    base = logdir / f"{scenario.name}-{cfg.algo}-s{cfg.seed}-{stamp}"
-    if base.resolve().parent != logdir.resolve():  # config.check_limits forbids such names
-        raise UsageError(f"scenario name {scenario.name!r} would leave --logdir {logdir}")
-    for k in range(1000):
-        path = base if k == 0 else base.with_name(f"{base.name}-{k}")
-        try:
-            path.mkdir(parents=True)
-            return path
-        except FileExistsError:
-            if not (path.exists() or path.is_symlink()):  # a parent is in the way, not a run
-                raise UsageError(f"--logdir {logdir}: cannot create {path}") from None
-            continue
-    raise FileExistsError(f"{base}: too many runs with this name")
+    p.add_argument(
+        "--checkpoint-every",
+        type=_EVERY,
+        default=0,
+        help="also save a checkpoint every K updates, besides every 30 s; 0: only those"
+        " (default: 0)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
+    p.add_argument(
+        "--live",
+        nargs="?",
+        const="",
+        metavar="[HOST:]PORT",
+        help="serve the run to Foxglove while it trains: one game's episodes and the learning"
+        " curve (default: off; given alone, 127.0.0.1:8765, local only unless a host is"
+        " named)",
+    )
 
 
 def check_new_run_dir(run_dir: Path) -> None:
@@ -159,9 +205,11 @@ def _check_run_files(run_dir: Path) -> None:
 
 def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Trainer:
     """The trainer of a new or resumed run, with the run's lock entered into ``held``."""
+    from ..training.trainer import Trainer
+
     options = {
         "checkpoint_every": args.checkpoint_every,
-        "progress": not args.no_progress and sys.stderr.isatty(),
+        "progress": not args.no_progress,  # a bar on a terminal, plain lines elsewhere
     }
     if args.resume:
         fixed = [f"--{k.replace('_', '-')}" for k in _TRAIN_FLAGS if k != "updates"]
@@ -190,6 +238,7 @@ def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Traine
             scene_every=args.scene_every,
             **options,
         )
+        trainer.live = _open_live(args, trainer.scenario, held)
         append_session(trainer.run_dir, command, trainer.update, trainer.scenario, trainer.cfg)
         return trainer
     if not args.scenario:
@@ -197,6 +246,7 @@ def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Traine
     scenario = scenario_from_args(args)
     cfg = train_from_args(args, {k: getattr(args, k) for k in _TRAIN_FLAGS})
     cfg = resolve_train(scenario, cfg)  # checked, before the run directory exists
+    live = _open_live(args, scenario, held)  # a busy port fails before anything is written
     if args.run_dir:
         run_dir = Path(args.run_dir)
         if run_dir.exists() and not run_dir.is_dir():
@@ -214,10 +264,10 @@ def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Traine
             raise
     else:
         writable_dir(args.logdir, "--logdir")
-        run_dir, existed = make_run_dir(args.logdir, scenario, cfg), False
+        run_dir, existed = make_run_dir(args.logdir, scenario, cfg, args.preset), False
         held.enter_context(run_lock(run_dir))
     try:
-        write_config(run_dir, scenario, cfg, command)
+        write_config(run_dir, scenario, cfg, command, args.preset)
         return Trainer(
             scenario,
             cfg,
@@ -225,6 +275,7 @@ def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Traine
             record=not args.no_record,
             log_every=1 if args.log_every is None else args.log_every,
             scene_every=args.scene_every or 0,
+            live=live,
             **options,
         )
     except BaseException:  # e.g. no memory for the games: leave no half-made run behind
@@ -232,6 +283,22 @@ def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Traine
         if not existed:
             shutil.rmtree(run_dir, ignore_errors=True)
         raise
+
+
+def _open_live(args: argparse.Namespace, scenario: Scenario, held: ExitStack) -> LiveView | None:
+    """The live view ``--live`` asks for (closed with ``held``), or ``None``."""
+    if args.live is None:
+        return None
+    from ..training.live import LiveView, live_address  # the Foxglove SDK: only when asked
+
+    live = LiveView.open(scenario, *live_address(args.live))
+    held.callback(live.close)
+    print(
+        f"live view: {live.url} (in Foxglove: Open connection, with the layout"
+        " docs/foxglove/layout.json)",
+        file=sys.stderr,
+    )
+    return live
 
 
 def _print_summary(summary: dict[str, Any]) -> None:

@@ -56,6 +56,7 @@ from .scenario import (
     Physics,
     Rewards,
     Scenario,
+    Sensing,
 )
 from .train import (
     PRESETS,
@@ -66,6 +67,7 @@ from .train import (
     Optimizer,
     Schedule,
     Train,
+    matching_preset,
     preset,
 )
 
@@ -98,6 +100,7 @@ __all__ = [
     "Rewards",
     "Scenario",
     "Schedule",
+    "Sensing",
     "Train",
     "build",
     "check_limits",
@@ -106,6 +109,7 @@ __all__ = [
     "entropy_game",
     "load_scenario",
     "load_train",
+    "matching_preset",
     "merge_overrides",
     "network_inputs",
     "network_weights",

@@ -212,9 +212,11 @@ for by ``hidden`` and ``layers`` (e.g. 64 layers of 16,384 units, 17 billion wei
 agent) ran out of memory or allocated for minutes before a run began."""
 
 
-def network_inputs(scenario: Scenario, cfg: Train) -> int:
-    """The length of the networks' input: the observation, or its one-hot cells."""
-    return scenario.obs_dim * (scenario.size if cfg.encoding == "onehot" else 1)
+def network_inputs(scenario: Scenario, cfg: Train, width: int | None = None) -> int:
+    """The length of the networks' input: the observation (or ``width`` numbers), or its
+    one-hot cells."""
+    width = scenario.obs_dim if width is None else width
+    return width * (scenario.size if cfg.encoding == "onehot" else 1)
 
 
 def network_weights(scenario: Scenario, cfg: Train) -> int:
@@ -231,16 +233,19 @@ def network_weights(scenario: Scenario, cfg: Train) -> int:
     def stack(n: int, fan_in: int, fan_out: int) -> int:  # a StackedLinear layer
         return n * (fan_in * fan_out + fan_out)
 
-    def team(agents: int, critics: int, values: int) -> int:
+    def team(agents: int, critics: int, values: int, seen: int) -> int:
         actors = stack(agents, inputs, hidden) + deep * stack(agents, hidden, hidden)
         actors += stack(agents, hidden, outputs) + agents * log_std
-        critic = stack(critics, inputs, hidden) + deep * stack(critics, hidden, hidden)
+        critic = stack(critics, seen, hidden) + deep * stack(critics, hidden, hidden)
         return actors + critic + stack(critics, hidden, values)
 
     n = scenario.pursuers
-    weights = team(n, 1 if cfg.algo == "a2cm" else n, 2 if cfg.split_rewards else 1)
+    # with sensing, A2CM's one critic reads the global state (centralised training)
+    shared = network_inputs(scenario, cfg, scenario.state_dim)
+    critics, seen = (1, shared) if cfg.algo == "a2cm" else (n, inputs)
+    weights = team(n, critics, 2 if cfg.split_rewards else 1, seen)
     if scenario.evader == "learned":  # an A2C team of one on one reward (teams.py)
-        weights += team(1, 1, 1)
+        weights += team(1, 1, 1, inputs)
     return weights
 
 

@@ -1,5 +1,5 @@
 """The scenario: one pursuit game as frozen, typed data (arena, agents, evader, time limit,
-rewards, collisions, physics), validated when built."""
+rewards, collisions, physics, sensing), validated when built."""
 
 from __future__ import annotations
 
@@ -99,6 +99,30 @@ class Physics:
 
 
 @dataclass(frozen=True)
+class Sensing:
+    """What each agent senses (SPEC §6b). ``radius = None`` (the default): every agent
+    observes the global state, as in the paper. Otherwise an agent senses the bodies within
+    ``radius`` of itself: on grids the Chebyshev distance in cells (``radius = 1`` is the
+    3×3 block around it), in physics the distance in metres between centres, both inclusive.
+    ``share``: the pursuers pool their sightings (one radio), so each knows every teammate's
+    position and the evader whenever any of them senses it; ``false``: each knows only what
+    it senses itself. A learned evader senses the pursuers within the same radius, alone."""
+
+    radius: float | None = None
+    share: bool = False
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the key of an impossible value."""
+        if self.radius is not None and not self.radius > 0:
+            raise InvalidKey("sensing.radius", f"must be > 0 when given, got {self.radius!r}")
+
+    @property
+    def on(self) -> bool:
+        """Whether agents observe less than the global state."""
+        return self.radius is not None
+
+
+@dataclass(frozen=True)
 class Scenario:
     """One pursuit game: arena, agents, evader, time limit, rewards and collision mode."""
 
@@ -113,6 +137,7 @@ class Scenario:
     rewards: Rewards = field(default_factory=Rewards)
     collisions: Collisions = field(default_factory=Collisions)
     physics: Physics = field(default_factory=Physics)
+    sensing: Sensing = field(default_factory=Sensing)
 
     def __post_init__(self) -> None:
         if self.physics.dt is None:  # the control type decides the default period
@@ -137,6 +162,7 @@ class Scenario:
         if self.max_steps < 1:
             raise InvalidKey("max_steps", f"must be >= 1, got {self.max_steps}")
         self.physics.validate()
+        self.sensing.validate()
         if self.mode == "physics":
             self.physics.check_substeps()
         elif self.control != "discrete":
@@ -155,10 +181,21 @@ class Scenario:
         return [f"pursuer_{i}" for i in range(self.pursuers)]
 
     @property
-    def obs_dim(self) -> int:
-        """Length of the global observation vector (SPEC §5)."""
+    def state_dim(self) -> int:
+        """Length of the global observation (state) vector (SPEC §5)."""
         per_agent = 4 if self.mode == "physics" else 2
         return per_agent * (self.pursuers + 1)
+
+    @property
+    def obs_dim(self) -> int:
+        """Length of one agent's observation: the global state's (:attr:`state_dim`) with
+        sensing off; with sensing on (SPEC §6b) its own ``k`` features, then ``1 + k`` (mask
+        bit, features) for each of the ``N`` other bodies: ``k + N (1 + k)``, where ``k`` is
+        2 (grid: x, y) or 4 (physics: x, y, vx, vy)."""
+        if not self.sensing.on:
+            return self.state_dim
+        k = 4 if self.mode == "physics" else 2
+        return k + self.pursuers * (1 + k)
 
 
 SCENARIO_LIMITS: dict[str, tuple[int, str]] = {

@@ -205,6 +205,17 @@ def preset(name: str) -> dict[str, Any]:
     return dict(PRESETS[name])
 
 
+def matching_preset(values: dict[str, Any]) -> str | None:
+    """The preset whose every value ``values`` (a :class:`Train` as a dict, e.g. a run's
+    ``config.json``) holds, or ``None``: how a run written before the preset was recorded
+    is named. A preset with an option overridden no longer matches, except ``updates``:
+    a longer or shorter run of the paper's method is still the paper's method."""
+    for name, fixed in PRESETS.items():
+        if all(values.get(key) == value for key, value in fixed.items() if key != "updates"):
+            return name
+    return None
+
+
 TRAIN_LIMITS: dict[str, tuple[int, str]] = {
     "num_envs": (65_536, "every game's state is held in memory"),
     "batch_size": (1 << 20, "a batch is held in memory"),

@@ -14,6 +14,7 @@ from ..config import Scenario
 from .core import Core, StepOutcome, action_shape, check_actions, check_commands
 from .factory import make_core
 from .render import render_rgb, render_text
+from .sensing import agent_observations
 
 
 class EnvNotReset(ResetNeeded, RuntimeError):
@@ -115,6 +116,12 @@ class Game:
     def observation(self) -> np.ndarray:
         """The global observation vector (SPEC §5)."""
         return self.core.observe()[0]
+
+    def observations(self) -> np.ndarray:
+        """Every agent's own observation ``(N + 1, obs_dim)`` (pursuers, then the evader) with
+        sensing on (SPEC §6b, :func:`~.sensing.agent_observations`)."""
+        core = self.core
+        return agent_observations(self.scenario, core.observe(), core.positions())[0]
 
     def info(self) -> dict[str, Any]:
         """Per-step facts for ``infos``: captured, collisions, wall contacts, events, t."""

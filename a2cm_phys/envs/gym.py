@@ -6,6 +6,9 @@ It serves scripted evaders only: one agent with one reward cannot be both teams 
 with a learned evader (``evader = "learned"``, SPEC §1b), which is refused with a
 :class:`~a2cm_phys.config.ConfigError` naming the key; use ``make_env`` (the evader is an
 agent there) or ``VectorEnv``.
+
+With sensing (SPEC §6b) the observation is the pursuers' own observations concatenated in
+index order, ``N · obs_dim`` numbers: what the team knows between them, never the state.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import numpy as np
 
 from ..config import ConfigError, Scenario, load_scenario
 from .game import Game
-from .parallel import observation_space
+from .parallel import observation_space, state_space
 
 
 class PursuitEnv(gym.Env):
@@ -49,7 +52,7 @@ class PursuitEnv(gym.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         self.render_mode = render_mode
         self.game = Game(self.scenario)
-        self.observation_space = observation_space(self.scenario)
+        self.observation_space = _joint_space(self.scenario)
         n = self.scenario.pursuers
         if self.scenario.continuous:
             self.action_space = gym.spaces.Box(-1.0, 1.0, (n, 2), dtype=np.float32)
@@ -63,19 +66,25 @@ class PursuitEnv(gym.Env):
         self.game.check("reset", started=False)
         super().reset(seed=seed)
         episode_seed = self.game.reset(seed, options)
-        return self.game.observation(), {**self.game.info(), "episode_seed": episode_seed}
+        return self._observe(), {**self.game.info(), "episode_seed": episode_seed}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply the joint action; returns the team reward."""
         self.game.check("step")
         out = self.game.step(np.asarray(action))
         return (
-            self.game.observation(),
+            self._observe(),
             float(out.reward[0]),
             bool(out.terminated[0]),
             bool(out.truncated[0]),
             self.game.info(),
         )
+
+    def _observe(self) -> np.ndarray:
+        """The global state, or with sensing the pursuers' observations concatenated."""
+        if not self.scenario.sensing.on:
+            return self.game.observation()
+        return self.game.observations()[: self.scenario.pursuers].reshape(-1)
 
     def render(self) -> str | np.ndarray | None:
         """A text picture (``ansi``) or an RGB array (``rgb_array``) of the arena."""
@@ -85,3 +94,13 @@ class PursuitEnv(gym.Env):
     def close(self) -> None:
         """Release the simulation; the env then refuses everything but ``close()``."""
         self.game.close()
+
+
+def _joint_space(scenario: Scenario) -> gym.spaces.Box:
+    """The joint view's observation space: the state's, or with sensing the pursuers'
+    observation spaces end to end."""
+    if not scenario.sensing.on:
+        return state_space(scenario)
+    one = observation_space(scenario)
+    n = scenario.pursuers
+    return gym.spaces.Box(np.tile(one.low, n), np.tile(one.high, n), dtype=np.float32)

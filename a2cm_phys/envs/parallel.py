@@ -21,13 +21,28 @@ from .evaders.learned import EVADER
 from .game import Game
 
 
-def observation_space(scenario: Scenario) -> spaces.Box:
-    """The global observation space: positions in [0, 1], physics velocities unbounded."""
+def state_space(scenario: Scenario) -> spaces.Box:
+    """The global state's space: positions in [0, 1], physics velocities unbounded."""
     n = scenario.pursuers + 1
-    low = np.zeros(scenario.obs_dim, dtype=np.float32)
-    high = np.ones(scenario.obs_dim, dtype=np.float32)
+    low = np.zeros(scenario.state_dim, dtype=np.float32)
+    high = np.ones(scenario.state_dim, dtype=np.float32)
     if scenario.mode == "physics":
         low[2 * n :], high[2 * n :] = -np.inf, np.inf
+    return spaces.Box(low, high, dtype=np.float32)
+
+
+def observation_space(scenario: Scenario) -> spaces.Box:
+    """One agent's observation space: the global state's with sensing off; with sensing
+    (SPEC §6b) mask bits and positions in [0, 1], physics velocities unbounded."""
+    if not scenario.sensing.on:
+        return state_space(scenario)
+    low = np.zeros(scenario.obs_dim, dtype=np.float32)
+    high = np.ones(scenario.obs_dim, dtype=np.float32)
+    if scenario.mode == "physics":  # own (x, y, vx, vy), then (mask, x, y, vx, vy) each
+        low[2:4], high[2:4] = -np.inf, np.inf
+        for j in range(scenario.pursuers):
+            at = 4 + 5 * j + 3
+            low[at : at + 2], high[at : at + 2] = -np.inf, np.inf
     return spaces.Box(low, high, dtype=np.float32)
 
 
@@ -44,7 +59,8 @@ def action_space(scenario: Scenario) -> spaces.Discrete | spaces.Box:
 class PursuitParallelEnv:
     """The pursuit game for N pursuers, PettingZoo parallel style.
 
-    Every pursuer observes the global state and receives the team reward. The evader is
+    Every pursuer observes the global state, or with sensing (SPEC §6b) its own masked
+    observation, and receives the team reward. The evader is
     scripted, or with ``evader = "learned"`` the agent ``"evader"`` (last in
     ``possible_agents``): it observes the same global state, acts in the pursuers' kind of
     action space, and receives :func:`~.core.evader_reward` (``rewards.evader``: minus the
@@ -74,11 +90,11 @@ class PursuitParallelEnv:
         self.agents: list[str] = []
         self._observation_space = observation_space(scenario)
         self._action_space = action_space(scenario)
-        self.state_space = self._observation_space
+        self.state_space = state_space(scenario)
         self.episode_seed: int | None = None
 
     def observation_space(self, agent: str) -> spaces.Box:
-        """Every agent observes the global state vector."""
+        """Every agent's observation space (the same for all; see :func:`observation_space`)."""
         return self._observation_space
 
     def action_space(self, agent: str) -> spaces.Discrete | spaces.Box:
@@ -92,9 +108,8 @@ class PursuitParallelEnv:
         self.game.check("reset", started=False)
         self.episode_seed = self.game.reset(seed, options)
         self.agents = list(self.possible_agents)
-        obs = self.game.observation()
         info = self.game.info()
-        return {a: obs for a in self.agents}, {a: dict(info) for a in self.agents}
+        return self._observe(self.agents), {a: dict(info) for a in self.agents}
 
     def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Move every agent (one action each; a scripted evader moves by itself); see the
@@ -110,13 +125,15 @@ class PursuitParallelEnv:
             missing = [a for a in self.agents if a not in actions]
             unknown = [a for a in actions if a not in self.agents]
             raise ValueError(f"actions: missing {missing}, unknown {unknown}")
-        joint_array = self._commands(joint) if self.scenario.continuous else self._moves(joint)
+        joint_array = (
+            _commands(joint, self.agents) if self.scenario.continuous else self._moves(joint)
+        )
         if self.learned_evader:  # the evader is the last agent
             n = self.scenario.pursuers
             out = self.game.step(joint_array[:, :n], checked=True, evader_action=joint_array[0, n])
         else:
             out = self.game.step(joint_array, checked=True)
-        obs = self.game.observation()
+        obs = self._observe(self.agents)
         info = self.game.info()
         reward = float(out.reward[0])
         terminated, truncated = bool(out.terminated[0]), bool(out.truncated[0])
@@ -127,12 +144,20 @@ class PursuitParallelEnv:
         if self.learned_evader:
             rewards[EVADER] = float(evader_reward(self.scenario, out)[0])
         return (
-            dict.fromkeys(agents, obs),
+            obs,
             rewards,
             dict.fromkeys(agents, terminated),
             dict.fromkeys(agents, truncated),
             {a: info.copy() for a in agents},
         )
+
+    def _observe(self, agents: list[str]) -> dict[str, np.ndarray]:
+        """Each agent's observation: the global state, or with sensing its own (a scripted
+        evader's row is not served)."""
+        if not self.scenario.sensing.on:
+            return dict.fromkeys(agents, self.game.observation())
+        rows = self.game.observations()
+        return {a: rows[k] for k, a in enumerate(agents)}
 
     def _moves(self, joint: list[Any]) -> np.ndarray:
         """The discrete joint action as ``(1, agents)`` int64, or a ``ValueError`` naming the
@@ -148,32 +173,8 @@ class PursuitParallelEnv:
                 )
         return np.array([joint], dtype=np.int64)
 
-    def _commands(self, joint: list[Any]) -> np.ndarray:
-        """The continuous joint action as ``(1, agents, 2)`` float64, or a ``ValueError``
-        naming the agent whose value is not two finite numbers (out-of-range ones are
-        clipped)."""
-        try:
-            commands = np.array([joint], dtype=np.float64)
-        except (TypeError, ValueError):
-            commands = None
-        ok = commands is not None and commands.shape == (1, len(joint), 2)
-        if ok and np.isfinite(commands).all():  # the common case
-            return commands
-        def bad(value: Any) -> bool:
-            try:
-                pair = np.asarray(value, dtype=np.float64)
-            except (TypeError, ValueError):
-                return True
-            return pair.shape != (2,) or not np.isfinite(pair).all()
-
-        k = next((k for k, value in enumerate(joint) if bad(value)), 0)
-        raise ValueError(
-            f"invalid action {joint[k]!r} for {self.agents[k]}: expected two finite numbers"
-            " (a velocity command as a fraction of max_speed)"
-        )
-
     def state(self) -> np.ndarray:
-        """The global state: the same vector every agent observes."""
+        """The global state: the vector every agent observes with sensing off."""
         self.game.check("state")
         return self.game.observation()
 
@@ -191,6 +192,32 @@ class PursuitParallelEnv:
     def unwrapped(self) -> PursuitParallelEnv:
         """The environment itself (there are no wrappers)."""
         return self
+
+
+def _commands(joint: list[Any], agents: list[str]) -> np.ndarray:
+    """The continuous joint action as ``(1, agents, 2)`` float64, or a ``ValueError``
+    naming the agent whose value is not two finite numbers (out-of-range ones are
+    clipped)."""
+    try:
+        commands = np.array([joint], dtype=np.float64)
+    except (TypeError, ValueError):
+        commands = None
+    ok = commands is not None and commands.shape == (1, len(joint), 2)
+    if ok and np.isfinite(commands).all():  # the common case
+        return commands
+
+    def bad(value: Any) -> bool:
+        try:
+            pair = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            return True
+        return pair.shape != (2,) or not np.isfinite(pair).all()
+
+    k = next((k for k, value in enumerate(joint) if bad(value)), 0)
+    raise ValueError(
+        f"invalid action {joint[k]!r} for {agents[k]}: expected two finite numbers"
+        " (a velocity command as a fraction of max_speed)"
+    )
 
 
 def make_env(

@@ -9,6 +9,10 @@ With a learned evader (SPEC §1b, ``evader = "learned"``) the evader is a second
 float commands with continuous control), and each step and episode report its reward
 (``VecStep.evader_reward``) and return (``EpisodeSummary.evader_ret``) beside the
 pursuers'. It observes the same global state as the pursuers (``obs``).
+
+With sensing on (SPEC §6b) ``obs`` rows are the team vectors of
+:func:`~.sensing.team_observation` (the state, then each agent's masked observation), of
+length ``obs_dim`` (:func:`~.sensing.team_dim`); with sensing off, the global state itself.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from ..config import Scenario
 from .core import StepOutcome, action_shape, check_joint_actions, evader_reward
 from .evaders.learned import evader_action_shape
 from .factory import make_core
+from .sensing import team_dim, team_observation
 from .tallies import EpisodeSummary, EpisodeTallies
 
 
@@ -65,7 +70,8 @@ class VectorEnv:
         self.action_shape = action_shape(scenario)  # one game's joint action
         self.learned_evader = scenario.evader == "learned"
         self.evader_action_shape = evader_action_shape(scenario)  # one game's evader action
-        self.obs_dim = scenario.obs_dim
+        self.obs_dim = team_dim(scenario)  # the trainer's input per game
+        self._sensing = scenario.sensing.on
         self.core = make_core(scenario, num_envs, workers)
         self._seeds = np.random.default_rng(0)
         self._tallies = EpisodeTallies(num_envs)
@@ -77,7 +83,15 @@ class VectorEnv:
         self._seeds = np.random.default_rng(seed)
         envs = np.arange(self.num_envs)
         self._start(envs)
-        return self.core.observe()
+        return self.observe()
+
+    def observe(self) -> np.ndarray:
+        """The observations of every game ``(B, obs_dim)``: the global state, or with
+        sensing the team vectors (see the module docstring)."""
+        obs = self.core.observe()
+        if self._sensing:
+            obs = team_observation(self.scenario, obs, self.core.positions())
+        return obs
 
     def _start(self, envs: np.ndarray) -> None:
         seeds = self._seeds.integers(0, 2**63, size=len(envs)).astype(np.uint64)
@@ -108,7 +122,7 @@ class VectorEnv:
             self._tallies.load_state(state)
         else:
             self._start(np.arange(self.num_envs))
-        return self.core.observe()
+        return self.observe()
 
     def episode_seeds(self) -> np.ndarray:
         """The episode seed of the episode running in each game."""
@@ -136,7 +150,7 @@ class VectorEnv:
         out = core.step(actions, evader_actions)
         evader_rewards = evader_reward(self.scenario, out) if self.learned_evader else None
         self._tallies.add(out, evader_rewards)
-        obs = core.observe()
+        obs = self.observe() if self._sensing else core.observe()
         positions, velocities = core.positions(), core.velocities()
         done = out.terminated | out.truncated
         episodes: list[EpisodeSummary] = []
@@ -146,7 +160,7 @@ class VectorEnv:
             episodes = self._tallies.summaries(envs, seeds, lengths, out, self.learned_evader)
             final_obs = obs.copy()
             self._start(envs)
-            obs[envs] = core.observe()[envs]
+            obs[envs] = (self.observe() if self._sensing else core.observe())[envs]
         return VecStep(
             obs=obs,
             reward=out.reward,

@@ -5,13 +5,14 @@ from __future__ import annotations
 
 from mcap.writer import Writer
 
-from .schemas import SCENE_SCHEMA, SCENE_TOPIC_PREFIX, SCHEMAS, schema_bytes
+from .schemas import SCENE_TOPIC_PREFIX, SCHEMAS, schema_bytes
 
 
 class Channels:
-    """The channel ids of one log by topic: the topics of :data:`.schemas.SCHEMAS`, all
-    registered at once when the file is opened, then a scene topic per game, registered
-    (with the scene schema, the first time) when that game's first scene is written."""
+    """The channel ids of one log by topic: the JSON topics of :data:`.schemas.SCHEMAS`,
+    all registered at once when the file is opened, then a scene topic per game,
+    registered (with the Foxglove SDK's ``foxglove.SceneUpdate`` schema, the first time)
+    when that game's first scene is written."""
 
     def __init__(self, writer: Writer) -> None:
         self._writer = writer
@@ -23,20 +24,15 @@ class Channels:
             )
             for topic, schema in SCHEMAS.items()
         }
-        self._scene_schema = 0
+        self._schemas: dict[str, int] = {}
 
     def __getitem__(self, topic: str) -> int:
         """The id of ``topic``'s channel; a scene topic's channel is registered on demand."""
         channel = self._ids.get(topic)
         if channel is None:
-            channel = self._ids[topic] = self._register_scene(topic)
-        return channel
+            if not topic.startswith(SCENE_TOPIC_PREFIX):
+                raise KeyError(topic)
+            from .sdk import register_scene_channel
 
-    def _register_scene(self, topic: str) -> int:
-        if not topic.startswith(SCENE_TOPIC_PREFIX):
-            raise KeyError(topic)
-        if not self._scene_schema:
-            self._scene_schema = self._writer.register_schema(
-                SCENE_SCHEMA["title"], "jsonschema", schema_bytes(SCENE_SCHEMA)
-            )
-        return self._writer.register_channel(topic, "json", self._scene_schema)
+            channel = self._ids[topic] = register_scene_channel(self._writer, topic, self._schemas)
+        return channel

@@ -1,6 +1,7 @@
 """Finished episodes as the log's messages: one trajectory block of the logged ones, the
-scenes of the drawn ones, and one summary block of them all (columnar: arrays over the
-block's episodes; see :mod:`.schemas`, and :mod:`.runlog` for how they are split again).
+scenes of the drawn ones, one summary block of them all (columnar: arrays over the
+block's episodes; see :mod:`.schemas`, and :mod:`.runlog` for how they are split again),
+and the learning curve's points they complete (:mod:`.curve`).
 
 Everything is gathered from the step buffers with one gather per field (:mod:`.block`) and
 written by the vectorised JSON text encoder (:mod:`.jsontext`), with no per-episode or
@@ -16,10 +17,16 @@ import numpy as np
 from ..config import Scenario
 from .block import Block
 from .buffers import StepBuffers
+from .curve import EpisodeCurve
 from .episode_rows import Finished
 from .jsontext import json_array, json_object
-from .scene import episode_scenes
-from .schemas import SUMMARY_TOPIC, TRAJECTORY_TOPIC, scene_topic, step_seconds
+from .schemas import (
+    PLOT_EPISODES_TOPIC,
+    SUMMARY_TOPIC,
+    TRAJECTORY_TOPIC,
+    scene_topic,
+    step_seconds,
+)
 
 _NS = 1_000_000_000
 
@@ -55,6 +62,7 @@ class _Columns:
         self.ids = np.arange(first_id, first_id + len(finished))
         self._check_in_sync()
         self.seed = np.array([e.seed for e in eps], dtype=np.uint64)
+        self.returns = np.array([e.ret for e in eps], dtype=np.float64)
         self.t0 = (base + self.end - self.length) * dt
         self.t1 = (base + self.end) * dt
 
@@ -87,21 +95,27 @@ class _Columns:
 class EpisodeEncoder:
     """Encodes queues of finished episodes of ``scenario`` into messages (see the module
     docs): the trajectory of every ``log_every``-th episode (0: none), the scenes of every
-    ``scene_every``-th (0: none), every summary; with a learned evader, its returns.
-    Episodes are numbered in the order they come, from the id given to :meth:`start`.
-    ``dt`` is the simulated seconds per step, ``step_ns`` the same in integer nanoseconds."""
+    ``scene_every``-th (0: none), every summary, a learning-curve point per ``plot_every``
+    episodes (0: none); with a learned evader, its returns. Episodes are numbered in the
+    order they come, from the id given to :meth:`start`. ``dt`` is the simulated seconds
+    per step, ``step_ns`` the same in integer nanoseconds."""
 
-    def __init__(self, scenario: Scenario, log_every: int, scene_every: int) -> None:
+    def __init__(
+        self, scenario: Scenario, log_every: int, scene_every: int, plot_every: int = 0
+    ) -> None:
         self.scenario = scenario
-        self.log_every, self.scene_every = log_every, scene_every
+        self.log_every, self.scene_every, self.plot_every = log_every, scene_every, plot_every
         self.dt = step_seconds(scenario)
         self.step_ns = round(self.dt * _NS)  # the clock in integer nanoseconds: exact
         self.learned = False
         self._next_id = 0
+        self._curve: EpisodeCurve | None = None
 
     def start(self, first_id: int, learned: bool) -> None:
         """Number the next episode ``first_id``; ``learned``: the evader is learned."""
         self._next_id, self.learned = first_id, learned
+        if self.plot_every:
+            self._curve = EpisodeCurve(self.scenario, self.plot_every, learned)
 
     def messages(
         self, finished: list[Finished], buf: StepBuffers, base: int
@@ -119,18 +133,48 @@ class EpisodeEncoder:
             sel = np.flatnonzero(logged)
             yield TRAJECTORY_TOPIC, log_time, cols.block(buf, sel, self.dt).json(cols.t0[sel])
         if self.scene_every:
+            from .scene import episode_scenes  # the Foxglove SDK, loaded only to draw
+
             for i in np.flatnonzero(cols.whole & (cols.ids % self.scene_every == 0)):
                 traj = cols.block(buf, np.array([i]), self.dt).trajectory(float(cols.t0[i]))
                 topic = scene_topic(traj.env)
                 for time_ns, data in episode_scenes(self.scenario, traj):
                     yield topic, time_ns, data
         yield SUMMARY_TOPIC, log_time, self._summary(cols, logged)
+        if self._curve is not None:
+            for time_ns, data in self._points(cols, base):
+                yield PLOT_EPISODES_TOPIC, time_ns, data
+
+    def finish(self) -> Iterator[tuple[str, int, bytes]]:
+        """The messages still owed when writing stops: the learning curve's open point."""
+        if self._curve is not None:
+            for time_ns, data in self._curve.rest():
+                yield PLOT_EPISODES_TOPIC, time_ns, data
+
+    def _points(self, cols: _Columns, base: int) -> list[tuple[int, bytes]]:
+        """The learning-curve points the block's episodes complete."""
+        ints, eps = cols.ints, cols.eps
+        extra = {}
+        if self.learned:
+            extra["evader_return"] = np.array([e.evader_ret for e in eps], dtype=np.float64)
+        return self._curve.add(
+            cols.ids,
+            (base + cols.end) * self.step_ns,
+            length=cols.length,
+            collisions=ints[:, 2],
+            wall_contacts=ints[:, 3],
+            captured=ints[:, 4],
+            truncated=ints[:, 5],
+            collision_terminated=ints[:, 6],
+            **{"return": cols.returns},
+            **extra,
+        )
 
     def _summary(self, cols: _Columns, logged: np.ndarray) -> bytes:
         """The summary block: every episode's summary, column by column."""
         eps, ints = cols.eps, cols.ints
         flags = ints[:, 4:7].astype(bool)
-        returns = {"return": json_array(np.array([e.ret for e in eps], dtype=np.float64))}
+        returns = {"return": json_array(cols.returns)}
         if self.learned:
             evader = np.array([e.evader_ret for e in eps], dtype=np.float64)
             returns["evader_return"] = json_array(evader)

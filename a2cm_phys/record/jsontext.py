@@ -3,8 +3,10 @@
 The recorder writes its messages as JSON text assembled from already-encoded parts. Integer,
 boolean and low-cardinality arrays (every grid field, times, most rewards) are written by
 numpy with no per-value Python work: each value is looked up as a fixed-width token, padded
-with spaces (valid JSON). Other floats go through ``json.dumps``, whose float text is
-Python's shortest round-trip ``repr``: every value reads back bit for bit.
+with spaces (valid JSON). Other arrays (physics floats, continuous commands) go through
+``orjson`` straight from numpy (``OPT_SERIALIZE_NUMPY``): its float text is the shortest
+that reads back as the same float64, so every value reads back bit for bit, with any JSON
+reader, as with ``json.dumps`` (Python's ``repr``) before it, about 50 times faster.
 """
 
 from __future__ import annotations
@@ -14,12 +16,21 @@ import math
 from typing import Any
 
 import numpy as np
+import orjson
 
 
 def json_number(x: float) -> str:
     """A JSON number (exact: Python's shortest round-trip repr), ``null`` if not finite."""
     x = float(x)
     return repr(x) if math.isfinite(x) else "null"
+
+
+def _dumps(x: np.ndarray) -> bytes:
+    """JSON text of a finite numeric array by ``orjson`` (floats widened to float64 first,
+    so that a float32 value is written as the float64 it equals, as ``tolist`` would)."""
+    if x.dtype.kind == "f" and x.dtype != np.float64:
+        x = x.astype(np.float64)
+    return orjson.dumps(np.ascontiguousarray(x), option=orjson.OPT_SERIALIZE_NUMPY)
 
 
 def _chars(x: np.ndarray) -> np.ndarray | None:
@@ -59,11 +70,15 @@ def _text(x: np.ndarray, sep: bytes, nested: bool) -> bytes:
 
     Numpy writes the text when it can (every grid field, times, rewards, flags): each token
     padded with spaces (valid JSON) to one width, so there is no per-value Python work.
-    Otherwise (physics floats) it is ``json.dumps``; exact either way.
+    Otherwise (physics floats) it is ``orjson`` (``json.dumps`` if a value is not finite,
+    written as before: ``NaN``, ``Infinity``); exact either way.
     """
     chars = _chars(x)
     if chars is None:
-        return json.dumps((x if nested else x[:, 0]).tolist(), separators=(",", ":")).encode()
+        values = x if nested else x[:, 0]
+        if x.dtype.kind != "f" or np.isfinite(x).all():
+            return _dumps(values)
+        return json.dumps(values.tolist(), separators=(",", ":")).encode()
     rows, cols, width = chars.shape
     cell = cols * (width + 1)
     out = np.empty((rows, cell - 1 + len(sep)), dtype=np.uint8)
@@ -80,7 +95,7 @@ def json_array(values: np.ndarray) -> bytes:
     if len(values) == 0:
         return b"[]"
     if values.dtype == np.uint64:
-        return json.dumps([str(v) for v in values.tolist()], separators=(",", ":")).encode()
+        return orjson.dumps([str(v) for v in values.tolist()])
     return _text(values.reshape(-1, 1), b",", nested=False)
 
 
@@ -95,12 +110,9 @@ def json_float_rows(matrix: np.ndarray) -> bytes:
     """A 2-D float array as JSON text, every value bit-exact as float64: the shortest
     round-trip repr, ``-0.0`` keeping its sign (never printed as the integer ``0``), a
     non-finite value as ``null`` (read back as NaN). For values that must replay exactly,
-    such as continuous commands; float32 values are exact float64 values."""
-    matrix = np.asarray(matrix, dtype=np.float64)
-    if not np.isfinite(matrix).all():
-        rows = [[v if math.isfinite(v) else None for v in row] for row in matrix.tolist()]
-        return json.dumps(rows, separators=(",", ":")).encode()
-    return json.dumps(matrix.tolist(), separators=(",", ":")).encode()
+    such as continuous commands; float32 values are exact float64 values. (``orjson``
+    writes a non-finite value as ``null`` itself.)"""
+    return _dumps(np.asarray(matrix, dtype=np.float64))
 
 
 def json_object(**fields: bytes) -> bytes:

@@ -1,124 +1,217 @@
-"""``foxglove.SceneUpdate`` messages that draw an episode in Foxglove's 3D panel.
+"""Foxglove ``SceneUpdate`` messages that draw an episode in Foxglove's 3D panel, built from
+the Foxglove SDK's own typed messages (:mod:`foxglove.messages`, protobuf-encoded).
 
-Each frame is self-contained (arena, walls, grid lines, pursuer cubes, evader sphere, a
-caption, and velocity arrows in physics mode), so seeking anywhere shows the full scene.
-Entities keep fixed ids (``arena``, ``pursuer_0`` …, ``evader``), so each frame replaces the
-previous one. Units are metres in frame ``arena``: a grid cell ``(x, y)`` is drawn at its
-centre ``(x + 0.5, y + 0.5)``, as in :mod:`a2cm_phys.envs.render`.
+Each frame is self-contained (the arena with its walls and cells, pursuer cubes, the evader
+sphere, each agent's trail, a caption, velocity arrows in physics mode, and the contacts of
+the step that led to it), so seeking anywhere shows the full scene. Entities keep fixed ids
+(``arena``, ``pursuer_0`` …, ``evader``, ``trails``, ``contacts``), so each frame replaces
+the previous one; ``contacts`` is empty except on the frame of a capture (a ring around the
+evader) or a collision (a marker between the two pursuers), so contacts flash. Units are
+metres in frame ``arena``: a grid cell ``(x, y)`` is drawn at its centre
+``(x + 0.5, y + 0.5)``, as in :mod:`a2cm_phys.envs.render`.
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterator
-from typing import Any
+from functools import lru_cache
 
 import numpy as np
+from foxglove.messages import (
+    ArrowPrimitive,
+    Color,
+    CubePrimitive,
+    LinePrimitive,
+    LinePrimitiveLineType,
+    Point3,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneUpdate,
+    SpherePrimitive,
+    TextPrimitive,
+    Timestamp,
+    Vector3,
+)
 
 from ..config import Scenario
 from ..envs.core import agent_names
-from ..envs.render import EVADER_COLOUR, PURSUER_COLOURS
+from ..envs.render import EVADER_COLOUR, PURSUER_COLOURS, step_contacts
 from .runlog import Trajectory
 
 FRAME_ID = "arena"
 """The frame every entity is drawn in (set it as the 3D panel's display frame)."""
+TRAIL_STATES = 40
+"""States of each agent's trail (the path it took to the frame's state, at most)."""
 
 _WALL = 0.15  # drawn wall thickness (m)
 _WALL_HEIGHT = 0.3
-_IDENTITY = {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
-_FOREVER = {"sec": 0, "nsec": 0}
+_CAPTURE_COLOUR = "#f2b701"
+_COLLISION_COLOUR = "#ffe600"
 
 
-def _rgba(colour: str, alpha: float = 1.0) -> dict[str, float]:
+def _rgba(colour: str, alpha: float = 1.0) -> Color:
     value = colour.lstrip("#")
     r, g, b = (int(value[i : i + 2], 16) / 255.0 for i in (0, 2, 4))
-    return {"r": r, "g": g, "b": b, "a": alpha}
+    return Color(r=r, g=g, b=b, a=alpha)
 
 
-def _pose(x: float, y: float, z: float) -> dict[str, Any]:
-    return {"position": {"x": x, "y": y, "z": z}, "orientation": _IDENTITY}
+def _pose(x: float, y: float, z: float, yaw: float = 0.0) -> Pose:
+    # Always an explicit orientation: an unset protobuf quaternion reads as all zeros.
+    turn = Quaternion(x=0.0, y=0.0, z=float(np.sin(yaw / 2)), w=float(np.cos(yaw / 2)))
+    return Pose(position=Vector3(x=x, y=y, z=z), orientation=turn)
 
 
-def _cube(
-    x: float, y: float, z: float, sx: float, sy: float, sz: float, colour: dict[str, float]
-) -> dict[str, Any]:
-    return {"pose": _pose(x, y, z), "size": {"x": sx, "y": sy, "z": sz}, "color": colour}
+def _cube(x: float, y: float, z: float, size: tuple[float, float, float], colour: Color):
+    return CubePrimitive(
+        pose=_pose(x, y, z), size=Vector3(x=size[0], y=size[1], z=size[2]), color=colour
+    )
 
 
-def _text(x: float, y: float, z: float, text: str, size: float = 0.3) -> dict[str, Any]:
-    return {
-        "pose": _pose(x, y, z),
-        "billboard": True,
-        "font_size": size,
-        "scale_invariant": False,
-        "color": _rgba("#000000"),
-        "text": text,
-    }
+def _text(x: float, y: float, z: float, text: str, size: float = 0.3) -> TextPrimitive:
+    return TextPrimitive(
+        pose=_pose(x, y, z), billboard=True, font_size=size, color=_rgba("#000000"), text=text
+    )
 
 
-def _entity(entity_id: str, stamp: dict[str, int], **primitives: list[Any]) -> dict[str, Any]:
-    entity: dict[str, Any] = {
-        "timestamp": stamp,
-        "frame_id": FRAME_ID,
-        "id": entity_id,
-        "lifetime": _FOREVER,
-        "frame_locked": False,
-        "metadata": [],
-    }
-    for kind in (
-        "arrows",
-        "cubes",
-        "spheres",
-        "cylinders",
-        "lines",
-        "triangles",
-        "texts",
-        "models",
-    ):
-        entity[kind] = primitives.get(kind, [])
-    return entity
+def _stamp(time_ns: int) -> Timestamp:
+    return Timestamp(sec=time_ns // 1_000_000_000, nsec=time_ns % 1_000_000_000)
 
 
-def _arena_primitives(scenario: Scenario) -> dict[str, list[Any]]:
-    size = float(scenario.size)
+@lru_cache(maxsize=16)
+def _arena(cells: int) -> tuple[list[CubePrimitive], list[LinePrimitive]]:
+    """The floor and walls (cubes) and the cells' lines of an arena of ``cells`` × ``cells``
+    (made once per size: every frame draws the same)."""
+    size = float(cells)
     grey, dark = _rgba("#f2f2f2"), _rgba("#555555")
-    half, mid = _WALL / 2, size / 2
+    half, mid, h = _WALL / 2, size / 2, _WALL_HEIGHT
+    long, side = (size + 2 * _WALL, _WALL, h), (_WALL, size, h)
     cubes = [
-        _cube(mid, mid, -0.01, size, size, 0.02, grey),
-        _cube(mid, -half, _WALL_HEIGHT / 2, size + 2 * _WALL, _WALL, _WALL_HEIGHT, dark),
-        _cube(mid, size + half, _WALL_HEIGHT / 2, size + 2 * _WALL, _WALL, _WALL_HEIGHT, dark),
-        _cube(-half, mid, _WALL_HEIGHT / 2, _WALL, size, _WALL_HEIGHT, dark),
-        _cube(size + half, mid, _WALL_HEIGHT / 2, _WALL, size, _WALL_HEIGHT, dark),
+        _cube(mid, mid, -0.01, (size, size, 0.02), grey),
+        _cube(mid, -half, h / 2, long, dark),
+        _cube(mid, size + half, h / 2, long, dark),
+        _cube(-half, mid, h / 2, side, dark),
+        _cube(size + half, mid, h / 2, side, dark),
     ]
     points = []
-    for k in range(1, scenario.size):
-        points += [
-            {"x": k, "y": 0.0, "z": 0.001},
-            {"x": k, "y": size, "z": 0.001},
-            {"x": 0.0, "y": k, "z": 0.001},
-            {"x": size, "y": k, "z": 0.001},
-        ]
-    lines = (
-        [
-            {
-                "type": 2,
-                "pose": _pose(0.0, 0.0, 0.0),
-                "thickness": 0.02,
-                "scale_invariant": False,
-                "points": points,
-                "color": _rgba("#bbbbbb"),
-                "colors": [],
-                "indices": [],
-            }
-        ]
-        if points
-        else []
-    )
-    return {"cubes": cubes, "lines": lines}
+    for k in range(1, cells):
+        for a, b in (((k, 0.0), (k, size)), ((0.0, k), (size, k))):
+            points += [Point3(x=a[0], y=a[1], z=0.001), Point3(x=b[0], y=b[1], z=0.001)]
+    lines = [
+        LinePrimitive(
+            type=LinePrimitiveLineType.LineList,
+            pose=_pose(0.0, 0.0, 0.0),
+            thickness=0.02,
+            points=points,
+            color=_rgba("#bbbbbb"),
+        )
+    ]
+    return cubes, lines if points else []
 
 
-def _stamp(time_ns: int) -> dict[str, int]:
-    return {"sec": time_ns // 1_000_000_000, "nsec": time_ns % 1_000_000_000}
+def _entity(entity_id: str, stamp: Timestamp, **primitives: list) -> SceneEntity:
+    return SceneEntity(timestamp=stamp, frame_id=FRAME_ID, id=entity_id, **primitives)
+
+
+def _agent(scenario: Scenario, i: int, name: str, x: float, y: float) -> dict[str, list]:
+    """The primitives of agent ``i`` at ``(x, y)``: the evader's sphere, or a pursuer's
+    cube with its number above it."""
+    phys = scenario.physics
+    if name == "evader":
+        d = 2 * phys.evader_radius
+        return {
+            "spheres": [
+                SpherePrimitive(
+                    pose=_pose(x, y, phys.evader_radius),
+                    size=Vector3(x=d, y=d, z=d),
+                    color=_rgba(EVADER_COLOUR),
+                )
+            ]
+        }
+    side = phys.box_side
+    colour = _rgba(PURSUER_COLOURS[i % len(PURSUER_COLOURS)])
+    return {
+        "cubes": [_cube(x, y, side / 2, (side, side, side), colour)],
+        "texts": [_text(x, y, side + 0.25, str(i), 0.25)],
+    }
+
+
+def _arrow(x: float, y: float, z: float, vx: float, vy: float) -> list[ArrowPrimitive]:
+    """A velocity arrow (none when at rest)."""
+    speed = float(np.hypot(vx, vy))
+    if speed <= 1e-9:
+        return []
+    return [
+        ArrowPrimitive(
+            pose=_pose(x, y, z, float(np.arctan2(vy, vx))),
+            shaft_length=0.4 * speed,
+            shaft_diameter=0.04,
+            head_length=0.1,
+            head_diameter=0.1,
+            color=_rgba("#000000"),
+        )
+    ]
+
+
+def _trails(centres: np.ndarray, z: float) -> list[LinePrimitive]:
+    """Each agent's path over ``centres`` ``(T, N + 1, 2)``, a line in its colour."""
+    if len(centres) < 2:
+        return []
+    out = []
+    for i in range(centres.shape[1]):
+        last = i == centres.shape[1] - 1
+        colour = EVADER_COLOUR if last else PURSUER_COLOURS[i % len(PURSUER_COLOURS)]
+        points = [Point3(x=float(x), y=float(y), z=z) for x, y in centres[:, i].tolist()]
+        out.append(
+            LinePrimitive(
+                type=LinePrimitiveLineType.LineStrip,
+                pose=_pose(0, 0, 0),
+                thickness=0.05,
+                points=points,
+                color=_rgba(colour, 0.5),
+            )
+        )
+    return out
+
+
+def _contact_marks(scenario: Scenario, centres: np.ndarray, contacts) -> dict[str, list]:
+    """A ring around a caught evader, a sphere between two pursuers that collided."""
+    marks: dict[str, list] = {"lines": [], "spheres": []}
+    if contacts is None:
+        return marks
+    if contacts.capturers:
+        x, y = centres[-1]
+        r = scenario.physics.evader_radius + 0.12
+        ring = [
+            Point3(x=float(x + r * np.cos(a)), y=float(y + r * np.sin(a)), z=0.05)
+            for a in np.linspace(0, 2 * np.pi, 24, endpoint=False)
+        ]
+        marks["lines"].append(
+            LinePrimitive(
+                type=LinePrimitiveLineType.LineLoop,
+                pose=_pose(0, 0, 0),
+                thickness=0.08,
+                points=ring,
+                color=_rgba(_CAPTURE_COLOUR),
+            )
+        )
+    for i, j in contacts.collisions:
+        x, y = (centres[i] + centres[j]) / 2
+        z = scenario.physics.box_side + 0.1
+        marks["spheres"].append(
+            SpherePrimitive(
+                pose=_pose(float(x), float(y), z),
+                size=Vector3(x=0.35, y=0.35, z=0.35),
+                color=_rgba(_COLLISION_COLOUR),
+            )
+        )
+    return marks
+
+
+def centres_of(scenario: Scenario, positions: np.ndarray) -> np.ndarray:
+    """Positions ``(…, N + 1, 2)`` in metres: cell centres in grid mode."""
+    centres = np.asarray(positions, dtype=np.float64)
+    return centres + 0.5 if scenario.mode == "grid" else centres
 
 
 def scene_update(
@@ -127,75 +220,58 @@ def scene_update(
     time_ns: int,
     caption: str = "",
     velocities: np.ndarray | None = None,
-) -> dict[str, Any]:
-    """One SceneUpdate (a dict ready for JSON) of a game's ``positions`` ``(N + 1, 2)``."""
+    trail: np.ndarray | None = None,
+    contacts: object | None = None,
+) -> SceneUpdate:
+    """One SceneUpdate of a game's ``positions`` ``(N + 1, 2)``; ``trail`` the states that
+    led there ``(T, N + 1, 2)`` (the last one ``positions``), ``contacts`` the
+    :class:`~a2cm_phys.envs.render.Contacts` of the step that led there."""
     stamp = _stamp(time_ns)
-    centres = np.asarray(positions, dtype=np.float64)
-    if scenario.mode == "grid":
-        centres = centres + 0.5
-    phys = scenario.physics
-    side, radius = phys.box_side, phys.evader_radius
-    arena = _arena_primitives(scenario)
+    centres = centres_of(scenario, positions)
+    cubes, lines = _arena(scenario.size)
+    arena: dict[str, list] = {"cubes": cubes, "lines": lines}
     if caption:
         arena["texts"] = [_text(scenario.size / 2, scenario.size + 0.6, 0.5, caption)]
     entities = [_entity("arena", stamp, **arena)]
-    names = agent_names(scenario)
-    for i, name in enumerate(names):
+    side = scenario.physics.box_side
+    for i, name in enumerate(agent_names(scenario)):
         x, y = float(centres[i, 0]), float(centres[i, 1])
-        prims: dict[str, list[Any]] = {}
-        if name == "evader":
-            d = 2 * radius
-            prims["spheres"] = [
-                {
-                    "pose": _pose(x, y, radius),
-                    "size": {"x": d, "y": d, "z": d},
-                    "color": _rgba(EVADER_COLOUR),
-                }
-            ]
-        else:
-            colour = _rgba(PURSUER_COLOURS[i % len(PURSUER_COLOURS)])
-            prims["cubes"] = [_cube(x, y, side / 2, side, side, side, colour)]
-            prims["texts"] = [_text(x, y, side + 0.25, str(i), 0.25)]
+        prims = _agent(scenario, i, name, x, y)
         if velocities is not None:
-            vx, vy = float(velocities[i, 0]), float(velocities[i, 1])
-            speed = float(np.hypot(vx, vy))
-            if speed > 1e-9:
-                yaw = float(np.arctan2(vy, vx))
-                arrow = {
-                    "pose": {
-                        "position": {"x": x, "y": y, "z": side + 0.05},
-                        "orientation": {
-                            "x": 0.0,
-                            "y": 0.0,
-                            "z": float(np.sin(yaw / 2)),
-                            "w": float(np.cos(yaw / 2)),
-                        },
-                    },
-                    "shaft_length": 0.4 * speed,
-                    "shaft_diameter": 0.04,
-                    "head_length": 0.1,
-                    "head_diameter": 0.1,
-                    "color": _rgba("#000000"),
-                }
-                prims["arrows"] = [arrow]
-        entity = _entity(name, stamp, **prims)
-        entity["metadata"] = [{"key": "x", "value": f"{x:g}"}, {"key": "y", "value": f"{y:g}"}]
-        entities.append(entity)
-    return {"deletions": [], "entities": entities}
+            prims["arrows"] = _arrow(x, y, side + 0.05, *map(float, velocities[i]))
+        entities.append(_entity(name, stamp, **prims))
+    drawn = centres[None] if trail is None else centres_of(scenario, trail)
+    entities.append(_entity("trails", stamp, lines=_trails(drawn, 0.02)))
+    entities.append(_entity("contacts", stamp, **_contact_marks(scenario, centres, contacts)))
+    return SceneUpdate(entities=entities)
+
+
+def episode_frame(scenario: Scenario, traj: Trajectory, k: int, time_ns: int) -> SceneUpdate:
+    """The SceneUpdate of state ``k`` of an episode (0: its start), stamped ``time_ns``:
+    a caption with the return so far, the trails that led there, the step's contacts."""
+    contacts, status = None, ""
+    if k and (traj.captured[k - 1] or traj.collisions[k - 1]):
+        before, after = traj.positions[k - 1], traj.positions[k]
+        contacts = step_contacts(scenario, before, after, traj.events, k)
+    if k == traj.length:
+        status = "  captured" if traj.length and traj.captured[-1] else "  end"
+    ret = float(np.sum(traj.reward[:k]))
+    caption = f"episode {traj.episode}  step {k}/{traj.length}  return {ret:g}{status}"
+    vel = None if traj.velocities is None else traj.velocities[k]
+    trail = traj.positions[max(0, k + 1 - TRAIL_STATES) : k + 1]
+    return scene_update(scenario, traj.positions[k], time_ns, caption, vel, trail, contacts)
+
+
+def episode_frames(scenario: Scenario, traj: Trajectory) -> Iterator[tuple[int, SceneUpdate]]:
+    """``(log_time_ns, SceneUpdate)`` of every state of the episode (its start, then after
+    each step), timed on the run clock (``t0 + k · dt``)."""
+    for k in range(traj.length + 1):
+        time_ns = round((traj.t0 + k * traj.dt) * 1e9)
+        yield time_ns, episode_frame(scenario, traj, k, time_ns)
 
 
 def episode_scenes(scenario: Scenario, traj: Trajectory) -> Iterator[tuple[int, bytes]]:
-    """``(log_time_ns, json_bytes)`` of one SceneUpdate per state of the episode (start, then
-    after each step), timed on the run clock (``t0 + k · dt``)."""
-    ret = 0.0
-    for k in range(traj.length + 1):
-        if k:
-            ret += float(traj.reward[k - 1])
-        status = ""
-        if k == traj.length:
-            status = "  captured" if traj.captured[-1] else "  end"
-        caption = f"episode {traj.episode}  step {k}/{traj.length}  return {ret:g}{status}"
-        time_ns = round((traj.t0 + k * traj.dt) * 1e9)
-        vel = None if traj.velocities is None else traj.velocities[k]
-        msg = scene_update(scenario, traj.positions[k], time_ns, caption, vel)
-        yield time_ns, json.dumps(msg, separators=(",", ":")).encode()
+    """``(log_time_ns, protobuf bytes)`` of :func:`episode_frames`: the messages of a
+    ``foxglove.SceneUpdate`` channel (see :mod:`.foxglove`)."""
+    for time_ns, msg in episode_frames(scenario, traj):
+        yield time_ns, msg.encode()

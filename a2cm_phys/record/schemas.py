@@ -1,11 +1,20 @@
-"""Topic names and JSON schemas of the run log ``episodes.mcap`` (all channels JSON-encoded).
+"""Topic names and JSON schemas of the run log ``episodes.mcap`` (JSON-encoded channels;
+the scenes are protobuf).
 
 | topic | schema | one message per |
 | --- | --- | --- |
 | ``/episodes/trajectories`` | ``a2cm_phys.TrajectoryBlock`` | block of logged episodes |
 | ``/episodes/summaries`` | ``a2cm_phys.EpisodeSummaryBlock`` | block of finished episodes |
 | ``/train/update`` | ``a2cm_phys.UpdateMetrics`` | learner update |
-| ``/scene/env_<i>`` | ``foxglove.SceneUpdate`` | step of a drawn episode played in game ``i`` |
+| ``/plot/episodes`` | ``a2cm_phys.EpisodePoint`` | :data:`PLOT_EVERY` finished episodes |
+| ``/plot/update`` | ``a2cm_phys.UpdatePoint`` | learner update |
+| ``/scene/env_<i>`` | ``foxglove.SceneUpdate`` | state of a drawn episode played in game ``i`` |
+
+The first three are the readers' source (:mod:`.reader`). The ``/plot`` topics repeat what
+they hold as plain numbers, for Foxglove's Plot panel: its JSON-schema reader takes one
+plain type per field (no ``["number", "null"]``, no arrays of arrays), which the summaries'
+blocks and the updates' nullable metrics are not, and a curve needs one point per message.
+The scenes are the Foxglove SDK's own messages and schema (:mod:`.scene`, :mod:`.sdk`).
 
 Episodes are written in *blocks* (the episodes that finished since the previous block,
 every few seconds at most), column-wise: per-episode arrays, and the per-step arrays of all
@@ -18,9 +27,8 @@ control period ``physics.dt`` in physics mode: 1 s for discrete moves, 0.1 s by 
 for continuous commands), so vector step ``k`` happens at ``k · step_seconds`` in every
 game: that is each game's cumulative simulated time, and the clock of every ``log_time``.
 A block is logged at the end of its last episode, an update at the step it was recorded, a
-scene frame at the time of the state it shows (scenes thus play at the control rate).
-Each channel's log times are non-decreasing. The Foxglove schema is generated here: a
-subset of ``foxglove.SceneUpdate`` with every field the official schema requires.
+curve point at the end of its last episode, a scene frame at the time of the state it
+shows (scenes thus play at the control rate). Each channel's log times are non-decreasing.
 
 Format versions (metadata ``format``; :mod:`.reader` reads both):
 
@@ -43,6 +51,10 @@ SUMMARY_TOPIC = "/episodes/summaries"
 """Blocks of finished episodes' summaries (:data:`SUMMARY_SCHEMA`)."""
 UPDATE_TOPIC = "/train/update"
 """One message per learner update (:data:`UPDATE_SCHEMA`)."""
+PLOT_EPISODES_TOPIC = "/plot/episodes"
+"""The learning curve: a point per :data:`PLOT_EVERY` episodes (:data:`EPISODE_POINT_SCHEMA`)."""
+PLOT_UPDATE_TOPIC = "/plot/update"
+"""Each update's metrics as plain numbers (:data:`UPDATE_POINT_SCHEMA`)."""
 SCENE_TOPIC_PREFIX = "/scene/env_"
 """``foxglove.SceneUpdate`` frames of the drawn episodes of game ``i``: ``/scene/env_<i>``."""
 METADATA_NAME = "a2cm_phys"
@@ -222,140 +234,96 @@ UPDATE_SCHEMA: dict[str, Any] = {
 """Schema of :data:`UPDATE_TOPIC` messages."""
 
 
-# --------------------------------------------------------------------------- foxglove
+# --------------------------------------------------------------------------- plots
+
+PLOT_EVERY = 5
+"""Episodes averaged in each :data:`PLOT_EPISODES_TOPIC` point: the fewest whose points
+cost the main job at most 5% of its time and 25% of its log (measured: about 1% and 18%;
+every 10 episodes: 1% and 9%, every episode: 51% of the log; ``BENCHMARKS.md``)."""
 
 
-def _obj(title: str, props: dict[str, Any]) -> dict[str, Any]:
-    return {"title": title, "type": "object", "properties": props, "required": list(props)}
+def _numbers(fields: dict[str, str], kind: str = "number") -> dict[str, Any]:
+    return {k: {"type": kind, "description": doc} for k, doc in fields.items()}
 
 
-_NUM = {"type": "number"}
-_TIME = {
-    "type": "object",
-    "title": "time",
-    "properties": {
-        "sec": {"type": "integer", "minimum": 0},
-        "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999},
-    },
-    "required": ["sec", "nsec"],
-}
-_DURATION = {
-    "type": "object",
-    "title": "duration",
-    "properties": {
-        "sec": {"type": "integer"},
-        "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999},
-    },
-    "required": ["sec", "nsec"],
-}
-_VEC3 = _obj("foxglove.Vector3", {"x": _NUM, "y": _NUM, "z": _NUM})
-_POINT3 = _obj("foxglove.Point3", {"x": _NUM, "y": _NUM, "z": _NUM})
-_QUAT = _obj("foxglove.Quaternion", {"x": _NUM, "y": _NUM, "z": _NUM, "w": _NUM})
-_POSE = _obj("foxglove.Pose", {"position": _VEC3, "orientation": _QUAT})
-_COLOR = _obj("foxglove.Color", {"r": _NUM, "g": _NUM, "b": _NUM, "a": _NUM})
-_ARRAY = {"type": "array", "items": {"type": "object"}}
-
-
-def _list(item: dict[str, Any]) -> dict[str, Any]:
-    return {"type": "array", "items": item}
-
-
-_PRIMITIVES = {
-    "arrows": _list(
-        _obj(
-            "foxglove.ArrowPrimitive",
-            {
-                "pose": _POSE,
-                "shaft_length": _NUM,
-                "shaft_diameter": _NUM,
-                "head_length": _NUM,
-                "head_diameter": _NUM,
-                "color": _COLOR,
-            },
-        )
-    ),
-    "cubes": _list(_obj("foxglove.CubePrimitive", {"pose": _POSE, "size": _VEC3, "color": _COLOR})),
-    "spheres": _list(
-        _obj("foxglove.SpherePrimitive", {"pose": _POSE, "size": _VEC3, "color": _COLOR})
-    ),
-    "cylinders": _ARRAY,
-    "lines": _list(
-        _obj(
-            "foxglove.LinePrimitive",
-            {
-                "type": {"type": "integer", "enum": [0, 1, 2]},
-                "pose": _POSE,
-                "thickness": _NUM,
-                "scale_invariant": {"type": "boolean"},
-                "points": _list(_POINT3),
-                "color": _COLOR,
-                "colors": _list(_COLOR),
-                "indices": _list({"type": "integer", "minimum": 0}),
-            },
-        )
-    ),
-    "triangles": _ARRAY,
-    "texts": _list(
-        _obj(
-            "foxglove.TextPrimitive",
-            {
-                "pose": _POSE,
-                "billboard": {"type": "boolean"},
-                "font_size": _NUM,
-                "scale_invariant": {"type": "boolean"},
-                "color": _COLOR,
-                "text": {"type": "string"},
-            },
-        )
-    ),
-    "models": _ARRAY,
-}
-
-SCENE_SCHEMA: dict[str, Any] = {
-    "title": "foxglove.SceneUpdate",
-    "description": "An update to the entities displayed in a 3D scene",
+EPISODE_POINT_SCHEMA: dict[str, Any] = {
+    "title": "a2cm_phys.EpisodePoint",
+    "description": "A point of the learning curve: the means over the episodes with ids "
+    "episode - episodes + 1 … episode (PLOT_EVERY of them; fewer at a part's start and end). "
+    "Plain numbers only, so that Foxglove's Plot panel reads them.",
     "type": "object",
     "properties": {
-        "deletions": _list(
-            _obj(
-                "foxglove.SceneEntityDeletion",
-                {
-                    "timestamp": _TIME,
-                    "type": {"type": "integer", "enum": [0, 1]},
-                    "id": {"type": "string"},
-                },
-            )
+        **_numbers(
+            {
+                "episode": "the point's last episode (ids in order of finishing)",
+                "episodes": "episodes averaged",
+            },
+            "integer",
         ),
-        "entities": _list(
-            _obj(
-                "foxglove.SceneEntity",
-                {
-                    "timestamp": _TIME,
-                    "frame_id": {"type": "string"},
-                    "id": {"type": "string"},
-                    "lifetime": _DURATION,
-                    "frame_locked": {"type": "boolean"},
-                    "metadata": _list(
-                        _obj(
-                            "foxglove.KeyValuePair",
-                            {"key": {"type": "string"}, "value": {"type": "string"}},
-                        )
-                    ),
-                    **_PRIMITIVES,
-                },
-            )
+        **_numbers(
+            {
+                "length": "mean steps",
+                "capture_steps": "mean steps of the captured episodes (absent if none was)",
+                "return": "mean return (the pursuers' raw team reward summed)",
+                "return_time": "mean of the return's time part (step, capture, wall terms)",
+                "return_collision": "mean of the return's collision part",
+                "evader_return": "learned evader only: its mean return",
+                "captured": "fraction ended by a capture",
+                "collision_terminated": "fraction ended by a collision",
+                "truncated": "fraction that reached max_steps",
+                "collisions": "mean pursuer collisions per episode",
+                "wall_contacts": "mean wall contacts per episode",
+            }
         ),
     },
-    "required": ["deletions", "entities"],
+    "required": [
+        "episode",
+        "episodes",
+        "length",
+        "return",
+        "return_time",
+        "return_collision",
+        "captured",
+        "collision_terminated",
+        "truncated",
+        "collisions",
+        "wall_contacts",
+    ],
 }
-"""Schema stored with the scene topics (a faithful subset of Foxglove's)."""
+"""Schema of :data:`PLOT_EPISODES_TOPIC` messages."""
+
+UPDATE_POINT_SCHEMA: dict[str, Any] = {
+    "title": "a2cm_phys.UpdatePoint",
+    "description": "One learner update as plain numbers for Foxglove's Plot panel: the "
+    "counters and the finite metrics of the /train/update message of the same update "
+    "(a non-finite or non-numeric metric is left out).",
+    "type": "object",
+    "properties": {
+        **_numbers(
+            {
+                "update": "the update",
+                "env_steps": "environment steps so far (all games)",
+                "episodes": "episodes finished so far",
+            },
+            "integer",
+        ),
+        **_numbers({k: k.replace("_", " ") for k in UPDATE_METRICS}),
+        **_numbers(SPARSE_METRICS),
+    },
+    "additionalProperties": {"type": "number"},
+    "required": ["update", "env_steps", "episodes"],
+}
+"""Schema of :data:`PLOT_UPDATE_TOPIC` messages."""
 
 SCHEMAS: dict[str, dict[str, Any]] = {
     TRAJECTORY_TOPIC: TRAJECTORY_SCHEMA,
     SUMMARY_TOPIC: SUMMARY_SCHEMA,
     UPDATE_TOPIC: UPDATE_SCHEMA,
+    PLOT_EPISODES_TOPIC: EPISODE_POINT_SCHEMA,
+    PLOT_UPDATE_TOPIC: UPDATE_POINT_SCHEMA,
 }
-"""Schema of each fixed topic (scene topics use :data:`SCENE_SCHEMA`)."""
+"""Schema of each fixed topic (JSON; the scene topics hold the Foxglove SDK's protobuf
+``foxglove.SceneUpdate``, see :mod:`.sdk`)."""
 
 
 def schema_bytes(schema: dict[str, Any]) -> bytes:

@@ -1,5 +1,7 @@
 """The ``/train/update`` messages: one learner update's metrics with the run's counters,
-and the wall-clock rate of vector steps between two updates (``steps_per_s``)."""
+and the wall-clock rate of vector steps between two updates (``steps_per_s``); the
+``/plot/update`` point of the same update is made from the same document
+(:func:`.curve.update_point`)."""
 
 from __future__ import annotations
 
@@ -7,7 +9,9 @@ import json
 import time
 from typing import Any
 
+from .curve import update_point
 from .jsontext import json_value
+from .schemas import PLOT_UPDATE_TOPIC, UPDATE_TOPIC
 
 
 class StepRate:
@@ -25,18 +29,32 @@ class StepRate:
         return (steps - before) * games / (now - then) if now > then else None
 
 
-def update_message(
+def update_document(
     update: int,
     metrics: dict[str, Any],
     env_steps: int,
     episodes: int,
     steps_per_s: float | None,
-) -> bytes:
-    """The JSON of one update: ``metrics`` (any key; values made JSON), ``steps_per_s``
-    unless ``metrics`` has it (or it is ``None``), and the counters ``update``,
-    ``env_steps`` and ``episodes``."""
+) -> dict[str, Any]:
+    """One update as a JSON-ready document: ``metrics`` (any key; values made JSON),
+    ``steps_per_s`` unless ``metrics`` has it (or it is ``None``), and the counters
+    ``update``, ``env_steps`` and ``episodes``."""
     doc = {k: json_value(v) for k, v in metrics.items()}
     if "steps_per_s" not in doc and steps_per_s is not None:
         doc["steps_per_s"] = steps_per_s
     doc.update(update=int(update), env_steps=env_steps, episodes=episodes)
-    return json.dumps(doc, separators=(",", ":")).encode()
+    return doc
+
+
+def update_messages(
+    update: int,
+    metrics: dict[str, Any],
+    env_steps: int,
+    episodes: int,
+    steps_per_s: float | None,
+) -> list[tuple[str, bytes]]:
+    """``(topic, data)`` of one update: its ``/train/update`` JSON (:func:`update_document`),
+    then its ``/plot/update`` point."""
+    doc = update_document(update, metrics, env_steps, episodes, steps_per_s)
+    full = json.dumps(doc, separators=(",", ":")).encode()
+    return [(UPDATE_TOPIC, full), (PLOT_UPDATE_TOPIC, update_point(doc))]

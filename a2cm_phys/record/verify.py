@@ -12,10 +12,11 @@ ended by a collision, collisions, wall contacts), so that a changed summary is c
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sized
 
 import numpy as np
 
+from ..base.progress import Progress
 from ..config import Scenario
 from ..envs.core import evader_reward
 from ..envs.factory import make_core
@@ -196,17 +197,25 @@ def summary_mismatch(log: RunLog, traj: Trajectory, scenario: Scenario) -> str |
 
 def verify(log: RunLog, trajs: Iterable[Trajectory] | None = None) -> int:
     """Verify ``trajs`` of ``log`` (default: every logged one) and their summaries; print a
-    report; 0 if all match, 1 otherwise (or if there is nothing to verify)."""
+    report; 0 if all match, 1 otherwise (or if there is nothing to verify). Progress over
+    the episodes goes to stderr (:class:`~a2cm_phys.base.progress.Progress`)."""
     scenario = log.scenario
-    trajs = log.trajectories() if trajs is None else trajs
+    total = len(trajs) if isinstance(trajs, Sized) else None
+    if trajs is None:
+        trajs, total = log.trajectories(), len(log.logged_episodes)
     core = make_core(scenario, 1)
     count = steps = 0
     bad: list[str] = []
-    for traj in trajs:
-        problem = verify_trajectory(scenario, traj, core) or summary_mismatch(log, traj, scenario)
-        count, steps = count + 1, steps + traj.length
-        if problem:
-            bad.append(f"episode {traj.episode} (env {traj.env}, seed {traj.seed}): {problem}")
+    with Progress("verify", total, "episodes") as progress:
+        for traj in trajs:
+            problem = verify_trajectory(scenario, traj, core) or summary_mismatch(
+                log, traj, scenario
+            )
+            count, steps = count + 1, steps + traj.length
+            if problem:
+                bad.append(f"episode {traj.episode} (env {traj.env}, seed {traj.seed}): {problem}")
+                progress.note(f"{len(bad)} diverged")
+            progress.update(1)
     if not count:
         print("verify: the log holds no trajectories to verify")
         return 1

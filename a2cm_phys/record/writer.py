@@ -29,25 +29,20 @@ from ..envs.vector import VecStep, VectorEnv
 from .encoder import EpisodeEncoder
 from .episode_rows import EpisodeRows
 from .logfile import LogFile, log_metadata
-from .schemas import UPDATE_TOPIC
-from .updates import StepRate, update_message
+from .schemas import PLOT_EVERY
+from .updates import StepRate, update_messages
 
 
 class EpisodeRecorder:
-    """Write a run's episodes, updates and scenes to an MCAP file (see the module docs).
-
-    Use: ``rec = EpisodeRecorder(run_dir / "episodes.mcap", scenario, {"train": to_dict(cfg)})``;
-    ``rec.start(vec_env)`` after ``vec_env.reset(seed)``; ``rec.record_step(actions, step)``
-    after each ``vec_env.step(actions)``; ``rec.record_update(update, metrics)`` after each
-    learner update; ``rec.close()`` at the end (or use ``with``). ``log_every = k`` logs the
-    trajectory of every k-th episode (0: none); summaries are always logged.
-    ``scene_every = k`` draws every k-th episode as ``foxglove.SceneUpdate`` frames (0: none).
-    ``metadata`` (JSON-able values) is stored with the scenario, package version and command
-    line; put the training config under ``"train"``. Actions are logged as given: moves, or
-    continuous commands exactly (see :mod:`.schemas`); with a learned evader its actions
-    (from ``step.outcome``) and its rewards and returns too. Episodes still running at ``close``
-    are not logged. A resumed run passes ``start(…, step=…, episode=…)`` to continue the
-    clocks of the log it follows.
+    """Write a run's episodes, updates and scenes to an MCAP file (see the module docs):
+    ``start(vec_env)`` after ``vec_env.reset(seed)``, ``record_step(actions, step)`` after
+    each vector step, ``record_update(update, metrics)`` after each update, ``close()`` (or
+    ``with``). Logged: every summary; the trajectory of every ``log_every``-th episode, the
+    ``foxglove.SceneUpdate`` frames of every ``scene_every``-th, a learning-curve point per
+    ``plot_every`` (:data:`.schemas.PLOT_EVERY`) and each update's plot point (0: none).
+    ``metadata`` (JSON-able, the training config under ``"train"``) is stored with the
+    scenario, version and command line. Episodes running at ``close`` are not logged; a
+    resumed run passes ``start(…, step=…, episode=…)`` to continue its log's clocks.
     """
 
     def __init__(
@@ -59,16 +54,19 @@ class EpisodeRecorder:
         scene_every: int = 0,
         flush_seconds: float = 2.0,
         chunk_bytes: int = 1 << 20,
+        plot_every: int | None = None,
     ) -> None:
-        if log_every < 0 or scene_every < 0:
-            raise ValueError("log_every and scene_every must be >= 0")
+        plot_every = PLOT_EVERY if plot_every is None else plot_every
+        if log_every < 0 or scene_every < 0 or plot_every < 0:
+            raise ValueError("log_every, scene_every and plot_every must be >= 0")
         self.path = Path(path)
         self.scenario = scenario
-        self.log_every, self.scene_every = log_every, scene_every
+        self.log_every, self.scene_every, self.plot_every = log_every, scene_every, plot_every
         self.flush_seconds, self.chunk_bytes = flush_seconds, chunk_bytes
-        self._encoder = EpisodeEncoder(scenario, log_every, scene_every)
+        self._encoder = EpisodeEncoder(scenario, log_every, scene_every, plot_every)
         self.dt, self._step_ns = self._encoder.dt, self._encoder.step_ns
-        meta = log_metadata(scenario, dict(metadata or {}), log_every, scene_every, self.dt)
+        user = {**(metadata or {}), "plot_every": plot_every}
+        meta = log_metadata(scenario, user, log_every, scene_every, self.dt)
         self._file = LogFile(self.path, meta, chunk_bytes, flush_seconds)
         self._vec: VectorEnv | None = None
         self._rows: EpisodeRows | None = None  # the step buffers, from start() on
@@ -123,9 +121,10 @@ class EpisodeRecorder:
             raise RuntimeError("EpisodeRecorder.record_update after close()")
         b = self._vec.num_envs if self._vec is not None else 0
         rate = self._rate.measure(self._steps, b) if self._vec is not None else None
-        data = update_message(update, metrics, self._steps * b, self._finished, rate)
+        msgs = update_messages(update, metrics, self._steps * b, self._finished, rate)
         try:
-            self._write(self._file.channels[UPDATE_TOPIC], self._steps * self._step_ns, data)
+            for topic, data in msgs[: 2 if self.plot_every else 1]:
+                self._write(self._file.channels[topic], self._steps * self._step_ns, data)
         except OSError as err:
             raise self._file.named(err) from None
         if self._file.due:
@@ -146,7 +145,7 @@ class EpisodeRecorder:
         if self._file.closed:
             return
         try:
-            self._encode_pending()
+            self._encode_pending(final=True)
             self._file.finish()
         except OSError as err:
             self._file.abandon()
@@ -173,12 +172,14 @@ class EpisodeRecorder:
         """Add one message: every write of the log goes through here."""
         self._file.add(channel, log_time, data)
 
-    def _encode_pending(self) -> None:
-        """Write the queued episodes as one trajectory block, scenes, one summary block."""
+    def _encode_pending(self, final: bool = False) -> None:
+        """Write the queued episodes' messages (and with ``final``, the open curve point)."""
         finished = self._rows.take() if self._rows is not None else []
-        if not finished:
-            return
-        channels, buf, base = self._file.channels, self._rows.buf, self._rows.base
-        for topic, log_time, data in self._encoder.messages(finished, buf, base):
+        channels = self._file.channels
+        if finished:
+            buf, base = self._rows.buf, self._rows.base
+            for topic, log_time, data in self._encoder.messages(finished, buf, base):
+                self._write(channels[topic], log_time, data)
+        for topic, log_time, data in self._encoder.finish() if final else ():
             self._write(channels[topic], log_time, data)
         self._file.close_chunk_if_full()

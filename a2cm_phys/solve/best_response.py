@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..base.progress import Progress
 from ..config import Scenario
 from .dp import solve_dp
 from .model import GridModel
@@ -116,13 +117,13 @@ def _choose(q: np.ndarray) -> np.ndarray:
 
 
 def _induction(
-    step: PursuerStep, evader: np.ndarray | None, tol: float
+    step: PursuerStep, evader: np.ndarray | None, tol: float, bar: Progress
 ) -> tuple[np.ndarray, np.ndarray | None, int, float]:
     """Backward induction over ``max_steps`` steps; ``evader`` ``(S, nb)`` or ``None``: max.
 
     Columns of the carried array: expected steps, P(capture), and P(end) when collisions
     can end the episode. Returns it, the last step's evader choice (``None`` for a fixed
-    evader), the steps computed and the error bound.
+    evader), the steps computed and the error bound; ``bar`` counts the steps.
     """
     horizon = step.scenario.max_steps
     columns = [np.ones_like(step.p_capture), step.p_capture]
@@ -145,6 +146,8 @@ def _induction(
         k += 1
         bound = (horizon - k) * float(np.max(new[:, 0] - x[:, 0], initial=0.0))
         x = new
+        bar.note(f"bound {bound:.1e}")
+        bar.update()
         if bound <= tol:
             break
     return x, choice, k, max(bound, 0.0)
@@ -159,16 +162,23 @@ def _outcome(step: PursuerStep, x: np.ndarray, k: int, bound: float, t0: float) 
 
 
 def evader_best_response(
-    scenario: Scenario, pursuer_probs: np.ndarray, tol: float = TOLERANCE, kind: Kind = "auto"
+    scenario: Scenario,
+    pursuer_probs: np.ndarray,
+    tol: float = TOLERANCE,
+    kind: Kind = "auto",
+    progress: bool = False,
 ) -> BestResponse:
     """The evader's best response to the pursuers' policy table ``(S, N, A)``.
 
-    ``kind`` forces an implementation of the step (:mod:`.pursuer_step`; for tests). Raises
+    ``kind`` forces an implementation of the step (:mod:`.pursuer_step`; for tests);
+    ``progress`` reports the steps of the induction and its error bound on stderr (off
+    by default: training calls this every few updates). Raises
     :class:`~.model.TooLargeError` for arenas beyond the limits (the message says which).
     """
     t0 = time.perf_counter()
     step = PursuerStep(scenario, pursuer_probs, np.arange(scenario.actions), kind)
-    x, choice, k, bound = _induction(step, None, tol)
+    with _steps("best response", scenario, progress) as bar:
+        x, choice, k, bound = _induction(step, None, tol, bar)
     policy = np.zeros((step.n_states, 1, scenario.actions))
     policy[np.arange(step.n_states), 0, choice] = 1.0
     policy[~step.valid] = 1.0 / scenario.actions  # never read: any distribution
@@ -183,14 +193,22 @@ def evaluate_tables(
     evader_probs: np.ndarray,
     tol: float = TOLERANCE,
     kind: Kind = "auto",
+    progress: bool = False,
 ) -> Outcome:
     """Truncated statistics of the pursuers' table ``(S, N, A)`` against the evader's table
-    ``(S, 1, A)`` (or ``(S, 1, 5)``, column 4 stay), exactly."""
+    ``(S, 1, A)`` (or ``(S, 1, 5)``, column 4 stay), exactly (``progress``: report the
+    steps on stderr)."""
     t0 = time.perf_counter()
     evader = check_table(scenario, evader_probs, "evader")[:, 0]
     step = PursuerStep(scenario, pursuer_probs, np.arange(evader.shape[1]), kind)
-    x, _, k, bound = _induction(step, evader, tol)
+    with _steps("evaluation", scenario, progress) as bar:
+        x, _, k, bound = _induction(step, evader, tol, bar)
     return _outcome(step, x, k, bound, t0)
+
+
+def _steps(what: str, scenario: Scenario, progress: bool) -> Progress:
+    """The progress of a backward induction over at most ``max_steps`` steps."""
+    return Progress(what, scenario.max_steps, "steps", enabled=progress, upper_bound=True)
 
 
 def pursuers_best_response(
@@ -198,6 +216,7 @@ def pursuers_best_response(
     evader_probs: np.ndarray,
     tol: float = TOLERANCE,
     joint_policy: np.ndarray | None = None,
+    progress: bool = False,
 ) -> BestResponse:
     """The pursuers' best response to the evader's table: the oracle against that evader.
 
@@ -205,17 +224,18 @@ def pursuers_best_response(
     termination; with the step penalty alone, the expected capture time). ``joint_policy``
     is its optimal joint policy if already solved against this evader (e.g. a cached
     :class:`~a2cm_phys.solve.cache.OracleSolution`'s ``policy``); otherwise it is solved here.
-    Raises :class:`~.model.TooLargeError` or :class:`~.model.UnsupportedError` as the oracle.
+    ``progress`` reports the solve and the evaluation on stderr. Raises
+    :class:`~.model.TooLargeError` or :class:`~.model.UnsupportedError` as the oracle.
     """
     t0 = time.perf_counter()
     meta: dict = {}
     if joint_policy is None:
         model = GridModel(scenario, evader_probs=evader_probs)
-        dp = solve_dp(model)
+        dp = solve_dp(model, progress=progress)
         joint_policy = dp.policy
         lose = 0 if dp.lose is None else int((dp.lose & model.valid()).sum())
         meta = {"sweeps": dp.sweeps, "losing_states": lose, "dp_seconds": dp.seconds}
     policy = joint_policy_table(scenario, joint_policy)
-    outcome = evaluate_tables(scenario, policy, evader_probs, tol)
+    outcome = evaluate_tables(scenario, policy, evader_probs, tol, progress=progress)
     meta.update(kind=outcome.kind, iterations=outcome.iterations, seconds=time.perf_counter() - t0)
     return BestResponse("pursuers", scenario, policy, outcome, start_state(scenario), meta)

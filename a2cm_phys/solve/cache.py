@@ -160,9 +160,13 @@ def _load(path: Path, model: GridModel) -> OracleSolution | None:
 
 
 def load_or_solve(
-    scenario: Scenario, cache_dir: str | Path | None = None, use_cache: bool = True
+    scenario: Scenario,
+    cache_dir: str | Path | None = None,
+    use_cache: bool = True,
+    progress: bool = False,
 ) -> OracleSolution:
-    """The cached solution of ``scenario``, or solve it (and cache it when ``use_cache``).
+    """The cached solution of ``scenario``, or solve it (and cache it when ``use_cache``;
+    ``progress``: report the value iteration on stderr).
 
     Raises :class:`~a2cm_phys.solve.TooLargeError` or
     :class:`~a2cm_phys.solve.UnsupportedError` for games it will not solve.
@@ -178,7 +182,7 @@ def load_or_solve(
     if tracing:
         tracemalloc.start()
     try:
-        dp = solve_dp(model)
+        dp = solve_dp(model, progress=progress)
         chain = policy_chain(model, dp.policy)
         check = evaluate_policy(chain, chain.reward, skip=dp.lose)
         steps = evaluate_policy(chain, np.ones(model.n_states), skip=dp.lose)
@@ -248,18 +252,21 @@ def cached_value(scenario: Scenario, cache_dir: str | Path | None = None) -> Gam
 
 
 def load_or_solve_value(
-    scenario: Scenario, cache_dir: str | Path | None = None, use_cache: bool = True
+    scenario: Scenario,
+    cache_dir: str | Path | None = None,
+    use_cache: bool = True,
+    progress: bool = False,
 ) -> GameValue:
     """The game's value bracketed (:func:`~a2cm_phys.solve.nash.game_value`), from the
-    cache beside the oracle's or solved (minutes; cached when ``use_cache``). A cached value
-    has no ``team`` (100 MB the bracket does not need). Raises the solver's TooLargeError
-    or UnsupportedError."""
+    cache beside the oracle's or solved (minutes; cached when ``use_cache``; ``progress``:
+    report the solve on stderr). A cached value has no ``team`` (100 MB the bracket does
+    not need). Raises the solver's TooLargeError or UnsupportedError."""
     value = cached_value(scenario, cache_dir) if use_cache else None
     if value is not None:
         return value
     from .nash import game_value
 
-    value = game_value(scenario)
+    value = game_value(scenario, progress=progress)
     if use_cache:
         path = _value_path(scenario, cache_dir)
         meta = {"key": value_cache_key(scenario), "start": value.start}

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..base.progress import Progress
 from .model import GridModel
 
 _POSITIVE = 1e-9  # probabilities are multiples of >= 1/5; anything above this is positive
@@ -75,8 +76,11 @@ def bellman_backup(
     return out
 
 
-def winning_states(model: GridModel) -> tuple[np.ndarray, list[np.ndarray], int]:
-    """States from which termination can be forced with probability one.
+def winning_states(
+    model: GridModel, progress: bool = False
+) -> tuple[np.ndarray, list[np.ndarray], int]:
+    """States from which termination can be forced with probability one (``progress``:
+    report the sweeps on stderr, :class:`~a2cm_phys.base.progress.Progress`).
 
     Returns ``(lose, safe, sweeps)``: ``lose`` the ``(C,) * (N + 1)`` mask of the other
     states, ``safe`` the per-slice masks of joint actions that surely stay among winning
@@ -86,28 +90,39 @@ def winning_states(model: GridModel) -> tuple[np.ndarray, list[np.ndarray], int]
     """
     win = np.ones(model.shape, dtype=bool)
     sweeps = 0
-    while True:
-        safe = [g < _POSITIVE for _, _, g in model.expect((~win).astype(np.float64))]
-        sweeps += 1
-        reach = np.zeros(model.shape, dtype=bool)
+    with Progress("reachability", unit="sweeps", enabled=progress) as bar:
         while True:
-            grown = reach.copy()
-            for k, (lo, hi, g) in enumerate(model.expect((~reach).astype(np.float64))):
-                ok = safe[k] & (g < 1.0 - _POSITIVE)
-                grown[lo:hi] |= ok.any(axis=model.action_axes)
-            grown &= win
+            safe = [g < _POSITIVE for _, _, g in model.expect((~win).astype(np.float64))]
             sweeps += 1
-            if np.array_equal(grown, reach):
-                break
-            reach = grown
-        if np.array_equal(reach, win):
-            return ~win, safe, sweeps
-        win = reach
+            bar.update()
+            reach = np.zeros(model.shape, dtype=bool)
+            while True:
+                grown = reach.copy()
+                for k, (lo, hi, g) in enumerate(model.expect((~reach).astype(np.float64))):
+                    ok = safe[k] & (g < 1.0 - _POSITIVE)
+                    grown[lo:hi] |= ok.any(axis=model.action_axes)
+                grown &= win
+                sweeps += 1
+                bar.note(f"{int(win.sum()):,} candidate states")
+                bar.update()
+                if np.array_equal(grown, reach):
+                    break
+                reach = grown
+            if np.array_equal(reach, win):
+                return ~win, safe, sweeps
+            win = reach
 
 
-def solve_dp(model: GridModel, tol: float | None = None, max_sweeps: int = 100_000) -> DPResult:
+def solve_dp(
+    model: GridModel,
+    tol: float | None = None,
+    max_sweeps: int = 100_000,
+    progress: bool = False,
+) -> DPResult:
     """Value iteration to a sup-norm residual below ``tol`` (default ``1e-10 · |step|``).
 
+    ``progress`` reports the sweeps and the residual on stderr
+    (:class:`~a2cm_phys.base.progress.Progress`; off for solvers called inside training).
     Raises ``RuntimeError`` if it does not converge within ``max_sweeps``.
     """
     start = time.perf_counter()
@@ -115,18 +130,21 @@ def solve_dp(model: GridModel, tol: float | None = None, max_sweeps: int = 100_0
     lose = safe = None
     qualitative = 0
     if model.may_escape:
-        lose, safe, qualitative = winning_states(model)
+        lose, safe, qualitative = winning_states(model, progress)
         if not lose.any():
             lose = safe = None
     v = np.zeros(model.shape)
     finite = slice(None) if lose is None else ~lose
     residual, sweeps = np.inf, 0
-    while residual >= tol:
-        if sweeps == max_sweeps:
-            raise RuntimeError(f"value iteration did not converge in {max_sweeps} sweeps")
-        new = bellman_backup(model, v, lose, safe)
-        residual = float(np.max(np.abs(new[finite] - v[finite]), initial=0.0))
-        v, sweeps = new, sweeps + 1
+    with Progress("value iteration", unit="sweeps", enabled=progress) as bar:
+        while residual >= tol:
+            if sweeps == max_sweeps:
+                raise RuntimeError(f"value iteration did not converge in {max_sweeps} sweeps")
+            new = bellman_backup(model, v, lose, safe)
+            residual = float(np.max(np.abs(new[finite] - v[finite]), initial=0.0))
+            v, sweeps = new, sweeps + 1
+            bar.note(f"residual {residual:.1e} (tol {tol:.0e})")
+            bar.update()
     dtype = np.min_scalar_type(model.n_joint - 1)
     policy = np.zeros(model.shape, dtype=dtype)
     v = bellman_backup(model, v, lose, safe, policy)

@@ -30,13 +30,13 @@ the moves, so they do not enter.
 
 from __future__ import annotations
 
-import functools
 import itertools
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..base.progress import Progress
 from ..config import Scenario
 from ..envs.grid import GridRules, meet
 from .tables import n_states, start_state, state_cells, valid_states
@@ -122,10 +122,20 @@ def transitions(scenario: Scenario) -> np.ndarray:
 
 
 def _solve(
-    nxt: np.ndarray, valid: np.ndarray, horizon: int, pursuers_first: bool
+    nxt: np.ndarray, valid: np.ndarray, horizon: int, pursuers_first: bool, progress: bool
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Backward induction of one game: values (integer steps) over ``S + 1`` entries, the
     last the "captured" sentinel (always 0), the last step's joint actions, the steps."""
+    what = "minimax upper" if pursuers_first else "minimax lower"
+    # no total: the values reach their fixed point long before max_steps (9 steps on 5x5)
+    with Progress(what, unit="steps", enabled=progress) as bar:
+        return _induction(nxt, valid, horizon, pursuers_first, bar)
+
+
+def _induction(
+    nxt: np.ndarray, valid: np.ndarray, horizon: int, pursuers_first: bool, bar: Progress
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`_solve`'s recursion, ``bar`` counting its steps."""
     v = np.zeros(len(valid) + 1, dtype=np.int32)
     new = np.zeros_like(v)
     policy = np.zeros(len(valid), dtype=np.int64)
@@ -142,30 +152,46 @@ def _solve(
                 new[part] = q.min(axis=1).max(axis=1) + 1
         new[:-1][~valid] = 0
         k += 1
-        if np.array_equal(new, v):
+        changed = int(np.count_nonzero(new != v))
+        bar.note(f"{changed:,} changed")
+        bar.update()
+        if not changed:
             break
         v, new = new, v
     return v[:-1].astype(np.float64), policy, k
 
 
-@functools.lru_cache(maxsize=4)
-def minimax_bounds(scenario: Scenario) -> MinimaxBounds:
-    """Solve both perfect-information games of the scenario (see the module).
+_SOLVED: dict[Scenario, MinimaxBounds] = {}
+"""The last few scenarios' bounds (:func:`minimax_bounds`), oldest first."""
+
+CACHED = 4
+"""Scenarios whose bounds :func:`minimax_bounds` keeps."""
+
+
+def minimax_bounds(scenario: Scenario, progress: bool = False) -> MinimaxBounds:
+    """Solve both perfect-information games of the scenario (see the module); ``progress``
+    reports the steps of each recursion on stderr.
 
     Cached per scenario (its arrays are read-only), so that every pairing of a cross-play
     table that names the minimax team shares one solution. Raises
     :class:`~.model.UnsupportedError` or :class:`~.model.TooLargeError` as
     :func:`check_minimax`. About 20 s and 0.5 GiB on a 5×5 arena with three pursuers.
     """
+    if scenario in _SOLVED:
+        return _SOLVED[scenario]
     check_minimax(scenario)
     t0 = time.perf_counter()
     nxt = transitions(scenario)
     valid = valid_states(scenario)
     horizon = scenario.max_steps
-    upper, policy, k_hi = _solve(nxt, valid, horizon, pursuers_first=True)
-    lower, _, k_lo = _solve(nxt, valid, horizon, pursuers_first=False)
+    upper, policy, k_hi = _solve(nxt, valid, horizon, True, progress)
+    lower, _, k_lo = _solve(nxt, valid, horizon, False, progress)
     for array in (lower, upper, policy):
         array.setflags(write=False)
-    return MinimaxBounds(
+    bounds = MinimaxBounds(
         lower, upper, policy, start_state(scenario), (k_lo, k_hi), time.perf_counter() - t0
     )
+    while len(_SOLVED) >= CACHED:
+        del _SOLVED[next(iter(_SOLVED))]
+    _SOLVED[scenario] = bounds
+    return bounds

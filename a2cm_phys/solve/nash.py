@@ -32,13 +32,14 @@ end it by colliding, so such scenarios raise :class:`~.model.UnsupportedError`.
 
 from __future__ import annotations
 
-import functools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
+from ..base.progress import Progress
 from ..config import Scenario
 from .minimax import check_minimax, transitions
 from .tables import check_table, n_states, start_state, valid_states
@@ -122,10 +123,16 @@ class _Games:
         self._cost = torch.empty(n, joint, 1)
         self._gain = torch.empty(n, 1, moves)
 
-    def solve(self, games: torch.Tensor, iterations: int) -> tuple[torch.Tensor, ...]:
+    def solve(
+        self,
+        games: torch.Tensor,
+        iterations: int,
+        tick: Callable[[], None] | None = None,
+    ) -> tuple[torch.Tensor, ...]:
         """``iterations`` of alternating RM+ on ``games`` ``(S, A^N, B)`` (the team
         minimises): the linearly weighted average strategies of both teams and, for each
-        state, the value each guarantees (the evader's lower, the team's upper)."""
+        state, the value each guarantees (the evader's lower, the team's upper).
+        ``tick()`` is called after each iteration."""
         team = _normalise(self.team_regret, torch.empty_like(self.team_regret))
         evader = _normalise(self.evader_regret, torch.empty_like(self.evader_regret))
         team_avg, evader_avg = torch.zeros_like(team), torch.zeros_like(evader)
@@ -141,6 +148,8 @@ class _Games:
             _normalise(self.evader_regret, evader)
             team_avg.add_(team, alpha=t)
             evader_avg.add_(evader, alpha=t)
+            if tick is not None:
+                tick()
         team_avg /= team_avg.sum(dim=1, keepdim=True)
         evader_avg /= evader_avg.sum(dim=1, keepdim=True)
         low = torch.bmm(games, evader_avg[:, :, None])[..., 0].min(dim=1).values
@@ -161,17 +170,23 @@ def _rules(scenario: Scenario) -> tuple[torch.Tensor, torch.Tensor]:
     return torch.from_numpy(transitions(scenario)), torch.from_numpy(~valid_states(scenario))
 
 
-def team_worst_case(scenario: Scenario, team: np.ndarray, tol: float = TOLERANCE) -> np.ndarray:
+def team_worst_case(
+    scenario: Scenario, team: np.ndarray, tol: float = TOLERANCE, progress: bool = False
+) -> np.ndarray:
     """``E[min(T, max_steps)]`` from every joint state when the evader best-responds to the
-    joint team table ``team`` ``(S, A^N)``."""
+    joint team table ``team`` ``(S, A^N)`` (``progress``: report the steps on stderr)."""
     nxt, invalid = _rules(scenario)
-    return _best_response(nxt, invalid, scenario.max_steps, tol, team=torch.tensor(team))
+    with _steps("team worst case", progress) as bar:
+        return _best_response(nxt, invalid, scenario.max_steps, tol, bar, team=torch.tensor(team))
 
 
-def evader_worst_case(scenario: Scenario, evader: np.ndarray, tol: float = TOLERANCE) -> np.ndarray:
+def evader_worst_case(
+    scenario: Scenario, evader: np.ndarray, tol: float = TOLERANCE, progress: bool = False
+) -> np.ndarray:
     """``E[min(T, max_steps)]`` from every joint state when the pursuers best-respond to the
     evader's table ``evader`` ``(S, 1, A)`` (the scenario's moves: no "stay" column where
-    ``actions = 4``; a ``ValueError`` says what is wrong with a table)."""
+    ``actions = 4``; a ``ValueError`` says what is wrong with a table; ``progress``: report
+    the steps on stderr)."""
     table = check_table(scenario, evader, "evader")
     if table.shape[-1] != scenario.actions:
         raise ValueError(
@@ -179,7 +194,15 @@ def evader_worst_case(scenario: Scenario, evader: np.ndarray, tol: float = TOLER
         )
     nxt, invalid = _rules(scenario)
     moves = torch.from_numpy(table[:, 0])
-    return _best_response(nxt, invalid, scenario.max_steps, tol, evader=moves)
+    with _steps("evader worst case", progress) as bar:
+        return _best_response(nxt, invalid, scenario.max_steps, tol, bar, evader=moves)
+
+
+def _steps(what: str, progress: bool) -> Progress:
+    """The progress of a backward induction: no total, as it stops long before
+    ``max_steps`` against the equilibrium (the bound falls geometrically to ``tol``),
+    and a time left reckoned from ``max_steps`` would be hours off."""
+    return Progress(what, unit="steps", enabled=progress)
 
 
 def _best_response(
@@ -187,12 +210,14 @@ def _best_response(
     invalid: torch.Tensor,
     horizon: int,
     tol: float,
+    bar: Progress,
     team: torch.Tensor | None = None,
     evader: torch.Tensor | None = None,
 ) -> np.ndarray:
     """Backward induction over ``horizon`` steps of the best response to ``team``
     ``(S, A^N)`` (the evader maximising) or to ``evader`` ``(S, B)`` (the team minimising),
-    stopped once the remaining steps cannot add ``tol`` (values only grow from 0)."""
+    stopped once the remaining steps cannot add ``tol`` (values only grow from 0); ``bar``
+    counts the steps."""
     mixture = team if team is not None else evader
     assert mixture is not None
     mixture = mixture.double()
@@ -207,54 +232,94 @@ def _best_response(
         new[invalid] = 0.0
         growth = float((new - values).max())
         values = new
+        bar.note(f"bound {(horizon - k) * growth:.1e} (tol {tol:.0e})")
+        bar.update()
         if (horizon - k) * growth <= tol:
             break
     return values.numpy()
 
 
-@functools.lru_cache(maxsize=2)
+_SOLVED: dict[tuple[Scenario, int, int, int], GameValue] = {}
+"""The last couple of :func:`game_value` solutions, oldest first."""
+
+CACHED = 2
+"""Solutions :func:`game_value` keeps."""
+
+
 def game_value(
     scenario: Scenario,
     sweeps: int = SWEEPS,
     iterations: int = ITERATIONS,
     polish: int = POLISH,
+    progress: bool = False,
 ) -> GameValue:
     """The scenario's value with mixed strategies, bracketed (see the module).
 
     Sweeps stop after ``sweeps`` (or ``max_steps``, the game's length) or once no state's
     value moves by more than its games' own approximation (the largest gap between the two
     teams' guarantees). Cached per arguments. About 3 minutes and 3.4 GiB on the 5×5 arena
-    with three pursuers on 2 cores. Raises :class:`~.model.UnsupportedError` or
-    :class:`~.model.TooLargeError` as :func:`check_game_value`.
+    with three pursuers on 2 cores; ``progress`` reports each phase on stderr (the sweeps'
+    iterations, the last sweep's polish, both worst cases). Raises
+    :class:`~.model.UnsupportedError` or :class:`~.model.TooLargeError` as
+    :func:`check_game_value`.
     """
+    key = (scenario, sweeps, iterations, polish)
+    if key in _SOLVED:
+        return _SOLVED[key]
     t0 = time.perf_counter()
     nxt, invalid = _rules(scenario)
-    n, joint, moves = nxt.shape
-    games_state = _Games(n, joint, moves)
-    values = torch.zeros(n)
-    done = 0
-    for done in range(1, min(sweeps, scenario.max_steps) + 1):  # noqa: B007 (reported)
-        games = _step_values(nxt, values)
-        _, _, low, high = games_state.solve(games, iterations)
-        new = 0.5 * (low + high)
-        new[invalid] = 0.0
-        moved = float((new - values).abs().max())
-        values = new
-        if moved <= float((high - low)[~invalid].max()):
-            break
-    team, evader, _, _ = games_state.solve(_step_values(nxt, values), polish)
-    del games
-    evader[invalid] = 1.0 / moves  # never read: any distribution
+    games_state = _Games(*nxt.shape)
+    values, done = _shapley(
+        nxt, invalid, games_state, min(sweeps, scenario.max_steps), iterations, progress
+    )
+    with Progress("polish", total=polish, unit="iterations", enabled=progress) as bar:
+        team, evader, _, _ = games_state.solve(_step_values(nxt, values), polish, bar.update)
+    evader[invalid] = 1.0 / nxt.shape[2]  # never read: any distribution
     team, evader = team.double(), evader.double()
     team /= team.sum(dim=1, keepdim=True)
     evader /= evader.sum(dim=1, keepdim=True)
     start, horizon = start_state(scenario), scenario.max_steps
-    lower = float(_best_response(nxt, invalid, horizon, TOLERANCE, evader=evader)[start])
-    upper = float(_best_response(nxt, invalid, horizon, TOLERANCE, team=team)[start])
+    with _steps("evader worst case", progress) as bar:
+        lower = float(_best_response(nxt, invalid, horizon, TOLERANCE, bar, evader=evader)[start])
+    with _steps("team worst case", progress) as bar:
+        upper = float(_best_response(nxt, invalid, horizon, TOLERANCE, bar, team=team)[start])
     evader_table = evader.numpy()[:, None, :]
     estimate, team_table = values.double().numpy(), team.numpy()
     for array in (estimate, evader_table, team_table):
         array.setflags(write=False)
-    return GameValue(
+    value = GameValue(
         lower, upper, estimate, evader_table, team_table, start, done, time.perf_counter() - t0
     )
+    while len(_SOLVED) >= CACHED:
+        del _SOLVED[next(iter(_SOLVED))]
+    _SOLVED[key] = value
+    return value
+
+
+def _shapley(
+    nxt: torch.Tensor,
+    invalid: torch.Tensor,
+    games_state: _Games,
+    sweeps: int,
+    iterations: int,
+    progress: bool,
+) -> tuple[torch.Tensor, int]:
+    """Shapley's value iteration, at most ``sweeps`` sweeps of ``iterations`` RM+
+    iterations each (see :func:`game_value`): the values and the sweeps run."""
+    values = torch.zeros(nxt.shape[0])
+    done = 0
+    # counted in iterations (a sweep is 20 of them, some 20 s on 5x5): a line every 30 s
+    with Progress("Shapley", unit="it", enabled=progress) as bar:
+        for done in range(1, sweeps + 1):
+            games = _step_values(nxt, values)  # (the last sweep's freed: ~0.4 GiB on 5x5)
+            _, _, low, high = games_state.solve(games, iterations, bar.update)
+            del games
+            new = 0.5 * (low + high)
+            new[invalid] = 0.0
+            moved = float((new - values).abs().max())
+            gap = float((high - low)[~invalid].max())
+            values = new
+            bar.note(f"sweep {done}: moved {moved:.1e}, gap {gap:.1e}")
+            if moved <= gap:
+                break
+    return values, done

@@ -3,11 +3,12 @@
     python -m a2cm_phys.sweep --scenarios grid,grid_collision --algos a2c,a2cm --seeds 0-4
 
 Each run is exactly ``python -m a2cm_phys.train`` with that scenario, algorithm and seed,
-written to its own run directory ``<logdir>/<scenario>-<algo>-s<seed>/`` (config,
-checkpoint, MCAP log, summary), so a sweep's numbers equal those of the runs done one by
-one. Re-running a sweep skips finished runs and resumes unfinished ones from their
-checkpoints, but only runs whose resolved scenario and training config are exactly the
-requested ones: a run directory holding another configuration is an error naming the
+written to its own run directory ``<logdir>/<scenario>-<algo>[-<preset>]-s<seed>/``
+(config, checkpoint, MCAP log, summary), so a sweep's numbers equal those of the runs done
+one by one. Re-running a sweep skips finished runs and resumes unfinished ones from their
+checkpoints; an existing run is found by its resolved scenario and training config, not its
+name (runs named before the preset was part of the name are found too), and a run
+directory of the new run's name holding another configuration is an error naming the
 difference, found before anything runs. A failing run is retried once and reported while the
 others go on. Each run holds its run directory's lock
 (:func:`a2cm_phys.training.rundir.run_lock`) while it runs: a run that another process
@@ -40,14 +41,19 @@ from .stopping import Interrupted, Received, handlers_kept, stop_signals
 
 
 def run_sequential(
-    specs: Sequence[RunSpec], sweep_dir: Path, on_done: Callable[[Outcome], None]
+    specs: Sequence[RunSpec],
+    sweep_dir: Path,
+    on_done: Callable[[Outcome], None],
+    on_start: Callable[[RunSpec], None] | None = None,
 ) -> list[Outcome]:
     """Run the specs one by one in this process, retrying each failure once (a busy run is
-    not retried); Ctrl-C or SIGTERM raise :class:`Interrupted` once the running run has saved
-    its checkpoint."""
+    not retried), calling ``on_start`` before each; Ctrl-C or SIGTERM raise
+    :class:`Interrupted` once the running run has saved its checkpoint."""
     outcomes = []
     with stop_signals():
         for spec in specs:
+            if on_start is not None:
+                on_start(spec)
             outcome = Outcome(spec)
             for attempt in (1, 2):
                 outcome.attempts = attempt
@@ -155,9 +161,11 @@ def run_all(
     address: str | None = None,
     cpus_per_run: float = 1.0,
     sequential: bool = False,
+    on_start: Callable[[RunSpec], None] | None = None,
 ) -> tuple[list[Outcome], bool]:
     """Run the specs on Ray when it is installed (and not ``sequential``), else one by one
-    in this process, saying so; returns the outcomes and whether Ray ran them."""
+    in this process (calling ``on_start`` as each begins), saying so; returns the
+    outcomes and whether Ray ran them."""
     use_ray = not sequential
     if use_ray:
         try:
@@ -171,4 +179,4 @@ def run_all(
             )
     if use_ray:
         return run_on_ray(specs, sweep_dir, on_done, address, cpus_per_run), True
-    return run_sequential(specs, sweep_dir, on_done), False
+    return run_sequential(specs, sweep_dir, on_done, on_start), False

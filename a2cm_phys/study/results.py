@@ -39,6 +39,14 @@ class Outcome:
     busy: str | None = None
 
     @property
+    def name(self) -> str:
+        """The run directory's name: where the run was found (a run named before the preset
+        was part of the name keeps its name), else the name a new run gets."""
+        if self.summary and self.summary.get("run_dir"):
+            return Path(self.summary["run_dir"]).name
+        return self.spec.name
+
+    @property
     def status(self) -> str:
         """``ran``, ``resumed``, ``skipped``, ``busy`` or ``failed``."""
         if self.busy is not None:
@@ -118,7 +126,7 @@ def _write_summary(
         csv_path.unlink(missing_ok=True)
     runs = [
         {
-            "run": o.spec.name,
+            "run": o.name,
             "outcome": o.status,
             "error": o.error,
             "busy": o.busy,

@@ -1,7 +1,10 @@
 """A sweep's run directories: what one holds (:func:`run_state`, :func:`stored_config`),
-whether a run may reuse it (:func:`check_reusable`: only a run of exactly the requested
-resolved configuration), and running one run in it under its lock (:func:`execute`: run,
-resume from its checkpoint, skip when done, or report it busy)."""
+where a run is (:func:`find_run`: the folder whose ``config.json`` holds its resolved
+scenario and training config, whatever its name, so that runs named before the preset was
+part of the name are found and never trained again), whether a run may reuse it
+(:func:`check_reusable`: only a run of exactly the requested resolved configuration), and
+running one run in it under its lock (:func:`execute`: run, resume from its checkpoint,
+skip when done, or report it busy)."""
 
 from __future__ import annotations
 
@@ -12,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 from ..config import ConfigError, stored_train, to_dict
-from ..training import checkpoint
 from ..training.rundir import (
     CHECKPOINT_NAME,
     CONFIG_NAME,
@@ -23,7 +25,6 @@ from ..training.rundir import (
     run_lock,
     write_config,
 )
-from ..training.trainer import Trainer
 from .runspec import RunSpec
 from .stopping import Interrupted
 
@@ -56,6 +57,8 @@ def stored_config(run_dir: Path) -> dict[str, Any] | None:
         except ConfigError as err:
             raise ConfigError(f"{err}; cannot tell which run this is") from None
     if (run_dir / CHECKPOINT_NAME).exists():
+        from ..training import checkpoint
+
         try:
             state = checkpoint.load(run_dir)
         except (OSError, ValueError) as err:
@@ -74,16 +77,61 @@ def differences(stored: Any, wanted: Any, prefix: str = "") -> list[str]:
     return [] if stored == wanted else [f"{prefix[:-1]}: {stored!r} there, {wanted!r} now"]
 
 
-def check_reusable(spec: RunSpec, sweep_dir: Path) -> None:
-    """A :class:`ConfigError` if ``spec``'s run directory holds a run of another resolved
-    configuration (it would be reported as this run's result)."""
-    run_dir = sweep_dir / spec.name
+def _wanted(spec: RunSpec) -> dict[str, Any]:
+    """``spec``'s resolved scenario and training config, as ``config.json`` holds them."""
+    scenario, cfg = spec.resolve()
+    return {"scenario": _plain(scenario), "train": _plain(cfg)}
+
+
+def _normalised(stored: dict[str, Any]) -> dict[str, Any]:
+    """A stored run's config completed for training keys added after it was written."""
+    return {"scenario": stored["scenario"], "train": stored_train(stored["train"])}
+
+
+def existing_runs(sweep_dir: Path) -> dict[Path, dict[str, Any]]:
+    """The runs in ``sweep_dir`` (its folders with a readable ``config.json``), each with
+    its stored scenario and training config (completed for keys added since)."""
+    runs: dict[Path, dict[str, Any]] = {}
+    if not sweep_dir.is_dir():
+        return runs
+    for folder in sorted(sweep_dir.iterdir()):
+        if not (folder / CONFIG_NAME).is_file():
+            continue
+        try:
+            runs[folder] = _normalised(read_config(folder))
+        except (ConfigError, OSError, TypeError):
+            continue  # not a run this sweep can tell; its name alone may still be checked
+    return runs
+
+
+_STATE_ORDER = {"done": 0, "partial": 1, "new": 2}
+
+
+def find_run(
+    spec: RunSpec, sweep_dir: Path, runs: dict[Path, dict[str, Any]] | None = None
+) -> Path:
+    """The run directory of ``spec`` in ``sweep_dir``: the folder whose ``config.json``
+    holds exactly ``spec``'s resolved scenario and training config, whatever its name (the
+    one named :attr:`RunSpec.name` first, then the most advanced: done, partial); else
+    ``sweep_dir / spec.name``, where a new run goes. ``runs`` is
+    :func:`existing_runs` of ``sweep_dir``, when the caller has read it already."""
+    sweep_dir = Path(sweep_dir)
+    named = sweep_dir / spec.name
+    runs = existing_runs(sweep_dir) if runs is None else runs
+    wanted = _wanted(spec)
+    same = [folder for folder, stored in runs.items() if not differences(stored, wanted)]
+    if not same or named in same:
+        return named
+    return min(same, key=lambda folder: (_STATE_ORDER[run_state(folder)], folder.name))
+
+
+def check_reusable(spec: RunSpec, run_dir: Path) -> None:
+    """A :class:`ConfigError` if ``run_dir`` (``spec``'s, from :func:`find_run`) holds a
+    run of another resolved configuration (it would be reported as this run's result)."""
     stored = stored_config(run_dir)
     if stored is None:
         return
-    scenario, cfg = spec.resolve()
-    stored = {**stored, "train": stored_train(stored["train"])}
-    diff = differences(stored, {"scenario": _plain(scenario), "train": _plain(cfg)})
+    diff = differences(_normalised(stored), _wanted(spec))
     if diff:
         shown = "; ".join(diff[:3]) + (f"; and {len(diff) - 3} more" if len(diff) > 3 else "")
         raise ConfigError(
@@ -96,8 +144,9 @@ def execute(spec: RunSpec, sweep_dir: str) -> dict[str, Any]:
     """Run (or resume, or skip) one run holding its run directory's lock; returns its
     summary, with ``"sweep"`` saying what was done (``ran``, ``resumed``, ``skipped``), or
     ``{"sweep": "busy", "busy": why}`` if another process holds the lock. Runs inside a Ray
-    task or in the sweep's process."""
-    run_dir = Path(sweep_dir) / spec.name
+    task or in the sweep's process. The run is found by its configuration
+    (:func:`find_run`); ``"run_dir"`` says where it is."""
+    run_dir = find_run(spec, Path(sweep_dir))
     run_dir.mkdir(parents=True, exist_ok=True)
     with contextlib.ExitStack() as held:
         try:
@@ -105,12 +154,13 @@ def execute(spec: RunSpec, sweep_dir: str) -> dict[str, Any]:
         except RunBusy as err:
             return {"sweep": BUSY, "busy": str(err)}
         # everything below, from reading the run's state on, happens under the lock
-        return _execute_locked(spec, run_dir)
+        return {**_execute_locked(spec, run_dir), "run_dir": str(run_dir)}
 
 
 def _execute_locked(spec: RunSpec, run_dir: Path) -> dict[str, Any]:
+    from ..training.trainer import Trainer
 
-    check_reusable(spec, run_dir.parent)
+    check_reusable(spec, run_dir)
     state = run_state(run_dir)
     if state == "done":
         return {**json.loads((run_dir / SUMMARY_NAME).read_text()), "sweep": "skipped"}
@@ -120,7 +170,7 @@ def _execute_locked(spec: RunSpec, run_dir: Path) -> dict[str, Any]:
         trainer = Trainer.resume(run_dir, **options)
     else:
         scenario, cfg = spec.resolve()
-        write_config(run_dir, scenario, cfg, spec.command(run_dir))
+        write_config(run_dir, scenario, cfg, spec.command(run_dir), spec.preset)
         trainer = Trainer(scenario, cfg, run_dir, **options)
     try:
         status = trainer.run()

@@ -174,9 +174,8 @@ def load_latest(run_dir: str | Path) -> tuple[dict[str, Any], str | None]:
         os.replace(latest, run_dir / DAMAGED_NAME)
     os.replace(previous, latest)  # the good one becomes the latest; no previous for now
     fsync_dir(run_dir)
-    note = (
-        f"{problem}; falling back to the previous checkpoint (update {state['update']})"
-        + (f", the damaged one kept as {DAMAGED_NAME}" if (run_dir / DAMAGED_NAME).exists() else "")
+    note = f"{problem}; falling back to the previous checkpoint (update {state['update']})" + (
+        f", the damaged one kept as {DAMAGED_NAME}" if (run_dir / DAMAGED_NAME).exists() else ""
     )
     return state, note
 

@@ -1,11 +1,17 @@
-"""The trainer's episode log: one new part of the run's MCAP log per session."""
+"""The trainer's episode log, one new part of the run's MCAP log per session, and its
+live view (``train --live``)."""
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 from ..config import to_dict
 from ..record.parts import new_part, part_files
 from ..record.writer import EpisodeRecorder
 from .state import RunState
+
+if TYPE_CHECKING:
+    from .live import LiveView
 
 
 def open_recorder(run: RunState) -> EpisodeRecorder:
@@ -37,3 +43,25 @@ def open_recorder(run: RunState) -> EpisodeRecorder:
     )
     recorder.start(run.env, run.obs, step=step, episode=run.stats.episodes)
     return recorder
+
+
+def open_live(run: RunState, host: str, port: int) -> LiveView:
+    """A live view serving on ``host:port`` (see :mod:`.live`), started on the run's env and
+    clocks (:func:`start_live`). A port that cannot be had is a ``UserError`` naming it."""
+    from .live import LiveView  # the Foxglove SDK, loaded only for a live view
+
+    live = LiveView.open(run.scenario, host, port)
+    try:
+        start_live(run, live)
+    except BaseException:
+        live.close()
+        raise
+    return live
+
+
+def start_live(run: RunState, live: LiveView) -> None:
+    """Start ``live`` (opened before the run, e.g. by the train command, so that a busy port
+    fails before anything is written) on this session's env and clocks, as the recorder
+    starts: it then gets ``step(actions, step)`` after every vector step and
+    ``update(update, metrics)`` after every update."""
+    live.start(run.env, step=run.update * run.cfg.steps_per_env, episode=run.stats.episodes)

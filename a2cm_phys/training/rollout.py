@@ -6,6 +6,10 @@ update, so the rollout loop allocates nothing of its own. Actions are stored wit
 and dtype of the policy's distribution (int64 indices, or float32 velocity commands), and
 the raw team reward is stored beside its components (``reward_parts``) and the pursuer
 collisions of each step, for learners that value them apart or constrain collisions.
+
+``obs_dim`` is the env's (``VectorEnv.obs_dim``): the global state's length, or with sensing
+the team vector's (the state, then every agent's own observation; SPEC §6b), from which
+each actor reads its own agent's slice.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
 
 StepHook = Callable[[np.ndarray, VecStep], None]
 """``hook(actions, step)``, called after every vector step (e.g. the episode recorder)."""
+
 
 def allocate_batch(
     steps: int,

@@ -1,6 +1,7 @@
 """A run directory's files: their names, the one-writer lock, and atomic writes.
 
-A run directory holds ``config.json``, ``checkpoint.pt`` (and ``checkpoint.prev.pt``, the
+A new run's folder is named :func:`run_name` plus the time (:func:`make_run_dir`). A run
+directory holds ``config.json``, ``checkpoint.pt`` (and ``checkpoint.prev.pt``, the
 previous good one), ``summary.json`` and the log parts ``episodes*.mcap``. Exactly one
 process writes a run at a time: :func:`run_lock` takes an exclusive ``fcntl.flock`` on
 ``RUN_DIR/.lock`` for the writer's whole life; readers take no lock. Every file a user
@@ -165,12 +166,47 @@ def remove_stray_temps(run_dir: str | Path) -> list[str]:
     return sorted(removed)
 
 
-def write_config(run_dir: Path, scenario: Scenario, cfg: Train, command: str) -> None:
+def run_name(scenario: str, algo: str, seed: int, preset: str | None = None) -> str:
+    """A run's name: ``<scenario>-<algo>[-<preset>]-s<seed>`` (``grid_collision-a2cm-paper-s0``;
+    without a preset, ``grid_collision-a2cm-s0``), so that runs of the paper's method and of
+    ours are told apart at a glance."""
+    middle = f"-{preset}" if preset else ""
+    return f"{scenario}-{algo}{middle}-s{seed}"
+
+
+def make_run_dir(
+    logdir: str | Path, scenario: Scenario, cfg: Train, preset: str | None = None
+) -> Path:
+    """Create ``<logdir>/<run_name>-<YYYYmmdd-HHMMSS>[-k]/`` and return it (``k`` counts
+    runs started in the same second); a :class:`UserError` naming ``--logdir`` if the
+    folder cannot be made there."""
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+    logdir = Path(logdir)
+    base = logdir / f"{run_name(scenario.name, cfg.algo, cfg.seed, preset)}-{stamp}"
+    if base.resolve().parent != logdir.resolve():  # config.check_limits forbids such names
+        raise UserError(f"scenario name {scenario.name!r} would leave --logdir {logdir}")
+    for k in range(1000):
+        path = base if k == 0 else base.with_name(f"{base.name}-{k}")
+        try:
+            path.mkdir(parents=True)
+            return path
+        except FileExistsError:
+            if not (path.exists() or path.is_symlink()):  # a parent is in the way, not a run
+                raise UserError(f"--logdir {logdir}: cannot create {path}") from None
+            continue
+    raise FileExistsError(f"{base}: too many runs with this name")
+
+
+def write_config(
+    run_dir: Path, scenario: Scenario, cfg: Train, command: str, preset: str | None = None
+) -> None:
     """Write ``config.json`` (atomically): the resolved scenario and training config, the
-    command and the library versions."""
+    preset they started from (its name, or ``null``), the command and the library
+    versions."""
     config = {
         "scenario": to_dict(scenario),
         "train": to_dict(cfg),
+        "preset": preset,
         "command": command,
         "created": datetime.now().isoformat(timespec="seconds"),
         "versions": library_versions(),
@@ -182,8 +218,8 @@ def append_session(
     run_dir: Path, command: str, update: int, scenario: Scenario, cfg: Train
 ) -> None:
     """Add a resumed session (its command, update and library versions) to ``config.json``,
-    with the training config it runs with; a missing or damaged ``config.json`` is rebuilt
-    from ``scenario`` (the checkpoint's)."""
+    with the training config it runs with (the rest, the ``preset`` included, is kept); a
+    missing or damaged ``config.json`` is rebuilt from ``scenario`` (the checkpoint's)."""
     path = run_dir / CONFIG_NAME
     try:
         config = json.loads(path.read_text(encoding="utf-8"))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from threadpoolctl import threadpool_limits
 
@@ -20,12 +20,15 @@ from ..base.exitcodes import OUT_OF_SPACE
 from ..config import Scenario
 from . import checkpoint
 from .progress import ProgressBar
-from .recording import open_recorder
+from .recording import open_recorder, start_live
 from .rollout import StepHook
 from .run_state import capture, state_at_last_update
 from .signals import ShieldedLog, StopSignals, signals_deferred
 from .state import LEARN, RunState
 from .summary import run_summary, write_summary
+
+if TYPE_CHECKING:
+    from .live import LiveView
 
 
 def run_session(run: RunState, one_update: Callable[[StepHook | None], None]) -> str:
@@ -103,6 +106,8 @@ def _train(
     status, save = "done", None
     with _recorder(run) as recorder, _bar(run) as bar:
         run.recorder = recorder
+        if run.live is not None:
+            start_live(run, run.live)
         log = ShieldedLog(recorder, signals) if recorder is not None else None
         try:
             _updates(run, signals, log, bar, one_update)
@@ -145,16 +150,32 @@ def _updates(
 ) -> None:
     """Update after update until the run is done or a stop is asked for (then a
     ``KeyboardInterrupt``), each logged, shown and checkpointed when one is due."""
-    on_step = log.record_step if log is not None else None
+    on_step = _step_hook(log.record_step if log is not None else None, run.live)
     while run.update < run.cfg.updates:
         if signals.stop_requested:
             raise KeyboardInterrupt
         one_update(on_step)
         if log is not None:
             log.record_update(run.update, run.last_metrics)
+        if run.live is not None:
+            run.live.update(run.update, run.last_metrics)
         bar.tick()
         if _checkpoint_due(run):
             save_checkpoint(run)
+
+
+def _step_hook(record: StepHook | None, live: LiveView | None) -> StepHook | None:
+    """What sees every vector step: the log's recorder, the live view, both or neither."""
+    if live is None:
+        return record
+    if record is None:
+        return live.step
+
+    def both(actions: Any, step: Any) -> None:
+        record(actions, step)
+        live.step(actions, step)
+
+    return both
 
 
 def _checkpoint_due(run: RunState) -> bool:
@@ -173,7 +194,8 @@ def _recorder(run: RunState) -> AbstractContextManager[Any]:
 
 
 def _bar(run: RunState) -> ProgressBar:
-    """The progress bar, or one that shows nothing."""
+    """The session's progress (a bar on a terminal, plain lines elsewhere), or one that
+    shows nothing."""
     return ProgressBar(run) if run.progress else ProgressBar(None)
 
 

@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from ..envs.vector import VectorEnv
     from .descent import ExploitabilityDescent
     from .episode_stats import EpisodeStats
+    from .live import LiveView
     from .opponents import OpponentPool, Pairing
     from .signals import StopSignals
     from .teams import Team
@@ -114,6 +115,8 @@ class RunState:
     """The stop signals while a session runs."""
     resume_note: str | None
     """Why a resume fell back to the previous checkpoint, if it did."""
+    live: LiveView | None
+    """The live view the run streams to (``train --live``), or ``None``."""
 
     @property
     def model(self) -> ActorCritic:

@@ -17,6 +17,7 @@ import numpy as np
 from ..algos import ActorCritic, Learner, make_model
 from ..algos.shaping import ProgressShaping
 from ..config import Scenario, Train
+from ..envs.sensing import team_dim
 from .rollout import allocate_batch, allocate_evader_batch
 from .seeding import evader_weights_generator
 
@@ -34,9 +35,7 @@ class Team:
 def evader_train_cfg(cfg: Train) -> Train:
     """The learned evader's training settings: the pursuers', as A2C of one agent on its one
     reward (no reward components, no collision constraint: collisions are the pursuers')."""
-    return dataclasses.replace(
-        cfg, algo="a2c", split_rewards=False, constrain_collisions=False
-    )
+    return dataclasses.replace(cfg, algo="a2c", split_rewards=False, constrain_collisions=False)
 
 
 def make_teams(scenario: Scenario, cfg: Train) -> tuple[Team, Team | None]:
@@ -46,7 +45,7 @@ def make_teams(scenario: Scenario, cfg: Train) -> tuple[Team, Team | None]:
     batch = allocate_batch(
         cfg.steps_per_env,
         cfg.num_envs,
-        scenario.obs_dim,
+        team_dim(scenario),
         scenario.pursuers,
         model.dist.action_shape,
         model.dist.action_dtype,

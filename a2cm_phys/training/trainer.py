@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
@@ -43,6 +43,9 @@ from .summary import run_summary
 from .teams import make_teams
 from .update import learn, players
 
+if TYPE_CHECKING:
+    from .live import LiveView
+
 __all__ = ["Trainer"]
 
 
@@ -57,7 +60,8 @@ class Trainer(RunState):
         run_dir: where checkpoints, summary and logs go (must exist).
         record: write the MCAP episode log (``episodes.mcap``) when the recorder exists.
         log_every, scene_every: passed to the episode recorder.
-        progress: show a tqdm bar on stderr.
+        progress: report progress on stderr (:mod:`.progress`: a bar on a terminal, a
+            plain line every 30 s elsewhere).
         checkpoint_seconds: save a checkpoint at least this often (wall time).
         checkpoint_every: also save every this many updates (0: time-based only).
     """
@@ -74,8 +78,10 @@ class Trainer(RunState):
         progress: bool = False,
         checkpoint_seconds: float = 30.0,
         checkpoint_every: int = 0,
+        live: LiveView | None = None,
     ) -> None:
         torch.set_num_threads(cfg.threads)
+        self.live = live
         self.scenario, self.cfg, self.run_dir = scenario, cfg, Path(run_dir)
         self.record, self.log_every, self.scene_every = record, log_every, scene_every
         self.progress = progress

@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from ...base.versions import __version__
+from ..watch import RunsProgress
 from .claims import Claim, Data, our_claims, paper_claims
 from .markdown import report
 from .measure import (
@@ -71,17 +73,22 @@ def collect(
     """The finished runs measured, by cell, and the runs that are missing (with why)."""
     by_cell: dict[tuple[str, str, str], list[RunResult]] = {}
     missing = []
+    done = [run for run in runs if run.state == "done"]
     for run in runs:
-        key = (run.cell.group, run.cell.scenario, run.cell.algo)
-        by_cell.setdefault(key, [])
+        by_cell.setdefault((run.cell.group, run.cell.scenario, run.cell.algo), [])
         if run.state != "done":
             missing.append((run, _why_missing(run, errors)))
-            continue
-        try:
-            summary = json.loads((run.run_dir / "summary.json").read_text())
-            by_cell[key].append(measure(run, summary, eval_episodes))
-        except Exception as err:  # a damaged run must not sink the report
-            missing.append((run, f"could not be measured: {type(err).__name__}: {err}"))
+    with RunsProgress("measuring runs", len(done), out=sys.stderr) as progress:
+        for run in done:
+            name = f"{run.cell.group}/{run.run_dir.name}"
+            progress.started(name)
+            try:
+                summary = json.loads((run.run_dir / "summary.json").read_text())
+                key = (run.cell.group, run.cell.scenario, run.cell.algo)
+                by_cell[key].append(measure(run, summary, eval_episodes))
+            except Exception as err:  # a damaged run must not sink the report
+                missing.append((run, f"could not be measured: {type(err).__name__}: {err}"))
+            progress.finished(name)
     return {k: v for k, v in by_cell.items() if v}, missing
 
 
@@ -89,6 +96,7 @@ def _figures(data: Data, out: Path, groups: list[str], modes: list[str]) -> dict
     from ...analysis.figures import Panel, Reference, plot_aggregate
     from ...analysis.run_series import Run, load_logged_run
     from ...record.runlog import LogError
+    from ...training.runs import run_label
 
     def loaded(results: list[RunResult]) -> list[Run]:
         out = []
@@ -108,9 +116,10 @@ def _figures(data: Data, out: Path, groups: list[str], modes: list[str]) -> dict
     def panel(group: str, scenario: str, title: str) -> Panel | None:
         lines = {}
         for algo in ("a2c", "a2cm"):
-            runs = loaded(data.runs(group, scenario, algo))
-            if runs:
-                lines[algo.upper()] = runs
+            results = data.runs(group, scenario, algo)
+            runs = loaded(results)
+            if runs:  # "A2CM (paper)" for the paper preset's runs: run_label
+                lines[run_label(results[0].run.run_dir)] = runs
         return Panel(title, lines, ref_of(scenario)) if lines else None
 
     layouts: list[tuple[str, str, list[Panel | None]]] = []
@@ -183,11 +192,17 @@ def add_references(data: Data, runs: list[PlannedRun], episodes: int, cache: Pat
     ``data``: the preset groups' in ``references``, the continuous group's (``pursuit``)
     in ``pursuit``."""
     overrides = {r.cell.scenario: r.spec.overrides for r in runs}
+    into = {"paper": data.references, "ours": data.references, "continuous": data.pursuit}
+    todo: dict[tuple[str, str], dict[str, Any]] = {}  # (kind, scenario) → where it goes
     for group, scenario, _ in data.by_cell:
-        if group in ("paper", "ours") and scenario not in data.references:
-            data.references[scenario] = reference(scenario, overrides[scenario], episodes, cache)
-        elif group == "continuous" and scenario not in data.pursuit:
-            data.pursuit[scenario] = reference(scenario, overrides[scenario], episodes, cache)
+        if group in into:
+            todo[("pursuit" if group == "continuous" else "reference", scenario)] = into[group]
+    with RunsProgress("references", len(todo), unit="scenarios", out=sys.stderr) as progress:
+        for (_, scenario), target in todo.items():
+            progress.started(scenario)
+            if scenario not in target:
+                target[scenario] = reference(scenario, overrides[scenario], episodes, cache)
+            progress.finished(scenario)
 
 
 def add_self_play(data: Data, args: argparse.Namespace, cache: Path) -> list[dict[str, Any]]:
@@ -197,10 +212,20 @@ def add_self_play(data: Data, args: argparse.Namespace, cache: Path) -> list[dic
     sp = {a: data.runs("selfplay", "grid_vs", a) for a in ("a2cm", "a2c")}
     horizon = args.exploit_max_steps
     if any(sp.values()) and not args.no_exploit:
-        data.oracle_worst_case = oracle_worst_case("grid_vs", horizon, cache)
-        data.minimax = minimax_bounds("grid_vs", horizon, cache)
-        for algo, results in sp.items():
-            data.exploit[algo] = [{**exploit(r.run, horizon), "seed": r.seed} for r in results]
+        runs = sum(len(results) for results in sp.values())
+        with RunsProgress("exact measures", 2 + runs, unit="solves", out=sys.stderr) as progress:
+            progress.started("the oracle's worst case")
+            data.oracle_worst_case = oracle_worst_case("grid_vs", horizon, cache)
+            progress.finished("the oracle's worst case")
+            progress.started("minimax")
+            data.minimax = minimax_bounds("grid_vs", horizon, cache)
+            progress.finished("minimax")
+            for algo, results in sp.items():
+                data.exploit[algo] = []
+                for r in results:
+                    progress.started(r.run.run_dir.name)
+                    data.exploit[algo].append({**exploit(r.run, horizon), "seed": r.seed})
+                    progress.finished(r.run.run_dir.name)
     pursuers, evaders = crossplay_sides(data, sp)
     if len(pursuers) <= 1:
         return []
@@ -292,7 +317,7 @@ def results_json(
         "oracle_worst_case": data.oracle_worst_case,
         "minimax": data.minimax,
         "crossplay": crossplay,
-        "missing": [{"run": f"{r.cell.group}/{r.spec.name}", "why": w} for r, w in missing],
+        "missing": [{"run": f"{r.cell.group}/{r.run_dir.name}", "why": w} for r, w in missing],
     }
     for ref in results["references"].values():
         if ref:

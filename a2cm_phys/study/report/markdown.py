@@ -267,7 +267,7 @@ def wall_section(
     ]
     if missing:
         lines += ["**Cells that could not be run** (the tables above lack them):", ""]
-        lines += [f"- `{run.cell.group}/{run.spec.name}`: {why}" for run, why in missing]
+        lines += [f"- `{run.cell.group}/{run.run_dir.name}`: {why}" for run, why in missing]
     else:
         lines.append("Every planned run finished.")
     return [*lines, ""]

@@ -1,13 +1,16 @@
 """The cells of the report, their runs in the sweep layout, and the wall-time estimate.
 
 A *cell* is a scenario × algorithm of a group; its runs are one per seed, in the sweep
-layout ``<logdir>/<group>/<scenario>-<algo>-s<seed>/`` (see :mod:`a2cm_phys.sweep`), so a
-finished run is skipped and an unfinished one resumed.
+layout ``<logdir>/<group>/<scenario>-<algo>[-paper]-s<seed>/`` (see :mod:`a2cm_phys.sweep`),
+so a finished run is skipped and an unfinished one resumed. An existing run is found by
+its resolved configuration, not its name (:func:`~a2cm_phys.study.rundirs.find_run`): the
+``paper`` group's runs named before the preset was part of the name are found too.
 """
 
 from __future__ import annotations
 
 import json
+import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -15,8 +18,9 @@ from pathlib import Path
 from typing import Any
 
 from ...config import ConfigError, preset
-from ..rundirs import check_reusable, execute, run_state
+from ..rundirs import check_reusable, execute, existing_runs, find_run, run_state
 from ..runspec import RunSpec
+from ..watch import RunsProgress
 
 GROUPS = ("paper", "ours", "continuous", "selfplay")
 """The groups of cells, in report order."""
@@ -66,16 +70,13 @@ class Cell:
 
 @dataclass(frozen=True)
 class PlannedRun:
-    """One run of the report: its cell, its sweep spec and where it lives."""
+    """One run of the report: its cell, its sweep spec, its sweep's folder and its run
+    directory there (:func:`~a2cm_phys.study.rundirs.find_run`)."""
 
     cell: Cell
     spec: RunSpec
     sweep_dir: Path
-
-    @property
-    def run_dir(self) -> Path:
-        """The run's directory."""
-        return self.sweep_dir / self.spec.name
+    run_dir: Path
 
     @property
     def state(self) -> str:
@@ -107,10 +108,15 @@ def cells(groups: list[str], modes: list[str]) -> list[Cell]:
     return out
 
 
+GROUP_PRESETS = {"paper": "paper"}
+"""The preset a group's runs start from (the others: our defaults)."""
+
+
 def group_train(group: str, base: dict[str, Any], options: GroupOptions) -> dict[str, Any]:
-    """A group's training options: the paper preset (``paper``) or our defaults, then the
-    shared ``--set train.KEY`` values ``base``, then the group's own."""
-    values = preset("paper") if group == "paper" else {}
+    """A group's training options: its preset (:data:`GROUP_PRESETS`) or our defaults,
+    then the shared ``--set train.KEY`` values ``base``, then the group's own."""
+    name = GROUP_PRESETS.get(group)
+    values = preset(name) if name else {}
     return {**values, **base, **options.train}
 
 
@@ -124,15 +130,26 @@ def plan(
 ) -> list[PlannedRun]:
     """The runs of the report, validated (also against run directories already there)."""
     runs = []
+    existing: dict[str, dict[Path, dict[str, Any]]] = {}
     for cell in cells(groups, modes):
         opts = options.get(cell.group, GroupOptions())
         train = group_train(cell.group, base_train, opts)
+        sweep_dir = logdir / cell.group
+        if cell.group not in existing:
+            existing[cell.group] = existing_runs(sweep_dir)
         for seed in seeds:
-            spec = RunSpec(cell.scenario, cell.algo, seed, train, dict(opts.scenario))
-            run = PlannedRun(cell, spec, logdir / cell.group)
+            spec = RunSpec(
+                cell.scenario,
+                cell.algo,
+                seed,
+                train,
+                dict(opts.scenario),
+                preset=GROUP_PRESETS.get(cell.group),
+            )
             spec.resolve()  # a bad option fails here, naming the key
-            check_reusable(spec, run.sweep_dir)
-            runs.append(run)
+            run_dir = find_run(spec, sweep_dir, existing[cell.group])
+            check_reusable(spec, run_dir)
+            runs.append(PlannedRun(cell, spec, sweep_dir, run_dir))
     return runs
 
 
@@ -161,26 +178,14 @@ def time_cells(
         except (OSError, ValueError):
             known = {}
     out = {}
-    seen = set()
+    first: dict[tuple[str, str], PlannedRun] = {}
     for run in runs:
-        key = (run.cell.group, run.cell.scenario)
-        if key in seen:
-            continue
-        seen.add(key)
-        train = {**run.spec.train, "updates": updates, "exploit_every": 0}
-        spec = RunSpec(run.spec.scenario, "a2cm", 0, train, run.spec.overrides)
-        tag = json.dumps([spec.scenario, spec.train, spec.overrides], sort_keys=True, default=str)
-        if tag in known:
-            per_update, sps = known[tag]
-        else:
-            with tempfile.TemporaryDirectory(prefix="a2cm-estimate-") as tmp:
-                start = time.perf_counter()
-                summary = execute(spec, tmp)
-                wall = time.perf_counter() - start
-            per_update = float(summary.get("wall_time_s", wall)) / updates
-            sps = float(summary.get("steps_per_s", 0.0))
-            known[tag] = (per_update, sps)
-        out[key] = Estimate(spec.scenario, run.cell.group, per_update, sps)
+        first.setdefault((run.cell.group, run.cell.scenario), run)
+    with RunsProgress("timing cells", len(first), unit="cells", out=sys.stderr) as progress:
+        for key, run in first.items():
+            progress.started("/".join(key))
+            out[key] = _time_cell(run, updates, known)
+            progress.finished("/".join(key))
     if cache is not None:
         try:
             cache.parent.mkdir(parents=True, exist_ok=True)
@@ -188,6 +193,24 @@ def time_cells(
         except OSError:
             pass
     return out
+
+
+def _time_cell(run: PlannedRun, updates: int, known: dict[str, Any]) -> Estimate:
+    """The estimate of ``run``'s cell type: from ``known`` (the cache), else timed."""
+    train = {**run.spec.train, "updates": updates, "exploit_every": 0}
+    spec = RunSpec(run.spec.scenario, "a2cm", 0, train, run.spec.overrides)
+    tag = json.dumps([spec.scenario, spec.train, spec.overrides], sort_keys=True, default=str)
+    if tag in known:
+        per_update, sps = known[tag]
+    else:
+        with tempfile.TemporaryDirectory(prefix="a2cm-estimate-") as tmp:
+            start = time.perf_counter()
+            summary = execute(spec, tmp)
+            wall = time.perf_counter() - start
+        per_update = float(summary.get("wall_time_s", wall)) / updates
+        sps = float(summary.get("steps_per_s", 0.0))
+        known[tag] = (per_update, sps)
+    return Estimate(spec.scenario, run.cell.group, per_update, sps)
 
 
 EVAL_LENGTH = {"discrete": 5.0, "continuous": 60.0}
