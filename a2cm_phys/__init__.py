@@ -16,6 +16,7 @@ from __future__ import annotations
 import importlib
 import importlib.abc
 import importlib.machinery
+import importlib.util
 import sys
 from types import ModuleType
 from typing import Any
@@ -65,7 +66,7 @@ class _RegisterWithGymnasium(importlib.abc.MetaPathFinder, importlib.abc.Loader)
         if name != "gymnasium":
             return None
         sys.meta_path.remove(self)
-        spec = importlib.machinery.PathFinder.find_spec(name, path)
+        spec = importlib.util.find_spec(name)  # every other finder, as Python would ask
         if spec is None or spec.loader is None:
             return spec
         self.loader, spec.loader = spec.loader, self
