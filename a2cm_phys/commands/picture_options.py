@@ -50,6 +50,12 @@ def add_render_options(p: argparse.ArgumentParser) -> None:
         metavar="K",
         help="episodes played and drawn with --render, one file each",
     )
+    add_drawing_options(g)
+
+
+def add_drawing_options(g: argparse._ActionsContainer) -> None:
+    """``--size``, ``--fps`` and ``--max-frames``: how an episode is drawn (``evaluate``
+    and ``replay`` alike)."""
     g.add_argument(
         "--size",
         type=int_range(120, 4000),

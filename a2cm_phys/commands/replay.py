@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .options import Parser, UsageError, int_range, output_file, positive_float, run_cli
+from .picture_options import add_drawing_options
 
 if TYPE_CHECKING:
     from ..record.runlog import RunLog
@@ -65,26 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="the file of --render gif|png (default: RUNNAME-epN.gif|png in the current"
         " folder); with several episodes, -epN is added to its name",
     )
-    p.add_argument(
-        "--size",
-        type=int_range(120, 4000),
-        default=DEFAULT_PIXELS,
-        metavar="PIXELS",
-        help="picture width in pixels (the height is 1.3 x, for the caption and legend)",
-    )
-    p.add_argument(
-        "--fps",
-        type=positive_float,
-        help="GIF frames per second (default: the control rate 1/physics.dt in physics,"
-        " 2 on grids; the last frame stays 2 s)",
-    )
-    p.add_argument(
-        "--max-frames",
-        type=int_range(1, 10_000),
-        metavar="N",
-        help="frames drawn at most, evenly spaced over the episode (default: 200 for gif,"
-        " 12 for png)",
-    )
+    add_drawing_options(p)
     _add_log_options(p)
     return p
 
