@@ -33,11 +33,6 @@ SAMPLE = 10
 """Episodes ``--export-foxglove`` and ``--serve`` take without ``--episode``: the last ones
 logged (the whole log of the main job would be 55 MB of scenes)."""
 
-DEFAULT_PIXELS = 480
-"""``--size``'s default (the same as :data:`a2cm_phys.envs.render.DEFAULT_PIXELS`, not
-imported here so that ``--help`` stays fast)."""
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m a2cm_phys.replay`` argument parser."""
     p = Parser(
