@@ -15,7 +15,7 @@ from test_record import make_log
 
 from a2cm_phys.analysis.episodes import episode_text
 from a2cm_phys.analysis.pictures import GRID_FRAME_SECONDS, episode_picture
-from a2cm_phys.commands import replay
+from a2cm_phys.commands import picture_options, replay
 from a2cm_phys.commands.replay import main
 from a2cm_phys.config import load_scenario
 from a2cm_phys.envs import render
@@ -63,7 +63,7 @@ def test_grid_gifs_play_two_frames_a_second_and_size_sets_the_width(
     out = tmp_path / "ep.gif"
     assert main([str(grid_run), "--episode", "1", "--render", "gif", "--out", str(out)]) == 0
     (width, height), durations = gif_durations(out)
-    assert width == render.DEFAULT_PIXELS == replay.DEFAULT_PIXELS and height > width
+    assert width == render.DEFAULT_PIXELS == picture_options.DEFAULT_PIXELS and height > width
     assert set(durations[:-1]) == {int(1000 * GRID_FRAME_SECONDS)} and durations[-1] >= 2000
     args = [str(grid_run), "--episode", "1", "--render", "gif", "--out", str(out), "--size", "200"]
     assert main(args) == 0
