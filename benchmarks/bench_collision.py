@@ -64,6 +64,9 @@ PIECES: dict[str, dict[str, Any]] = {
     "dist.5": {"distance_shaping": 0.5},
     "dist2": {"distance_shaping": 2.0},
     "h256": {"hidden": 256},
+    "gru": {"recurrent": "gru"},  # recurrent actors (issue 33)
+    "onehot": {"encoding": "onehot"},
+    "l2": {"layers": 2},
     "n16": {"batch_size": 256},  # 16-step rollouts (16 games)
     "n32": {"batch_size": 512},  # 32-step rollouts
     "n64": {"batch_size": 1024},  # 64-step rollouts

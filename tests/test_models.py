@@ -8,6 +8,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from a2cm_phys.algos import make_model
 from a2cm_phys.algos.distributions import (
     CategoricalActions,
     GaussianActions,
@@ -15,7 +16,7 @@ from a2cm_phys.algos.distributions import (
 )
 from a2cm_phys.algos.encoding import OneHotCells
 from a2cm_phys.algos.layers import StackedLinear
-from a2cm_phys.algos.models import ActorCritic, make_model
+from a2cm_phys.algos.models import ActorCritic
 from a2cm_phys.config import Scenario, Train
 
 torch.set_num_threads(1)
@@ -183,7 +184,7 @@ def test_gaussian_parameter_count_and_shapes(shared: bool) -> None:
     actor = (OBS * H + H) + (H * 2 + 2) + 2  # the mean head and a log-std per dimension
     critic = (OBS * H + H) + (H + 1)
     assert n_params(m) == N * actor + m.n_critics * critic
-    dist = m.distribution(torch.randn(5, OBS))
+    dist = m.dist.torch(m.actor_outputs(torch.randn(5, OBS)), m.log_std)
     assert dist.batch_shape == (5, N) and dist.event_shape == (2,)
     actions = m.act(np.zeros((5, OBS), dtype=np.float32), np.random.default_rng(0))
     assert actions.shape == (5, N, 2) and actions.dtype == np.float32

@@ -8,6 +8,7 @@ learner.
 - :class:`Learner`: one autograd loss and optimiser step; :class:`NonFiniteLoss`.
 """
 
+from .build import action_distribution, make_model
 from .distributions import (
     ActionDistribution,
     CategoricalActions,
@@ -17,7 +18,7 @@ from .distributions import (
 from .layers import StackedLinear
 from .learner import BATCH_KEYS, Learner
 from .losses import NonFiniteLoss
-from .models import ActorCritic, action_distribution, make_model
+from .models import ActorCritic
 from .normalize import ValueNorm
 from .returns import advantages, discounted_returns, discounted_returns_np, gae
 

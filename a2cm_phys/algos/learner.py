@@ -49,6 +49,7 @@ import torch
 from .losses import Losses, NonFiniteLoss, a2c_losses, entropy_coef, loss_metrics
 from .normalize import ValueNorm
 from .optimizer import backpropagate, make_optimizer, set_learning_rate
+from .recurrent import learner_inputs
 from .targets import (
     actor_advantage,
     advantages_and_targets,
@@ -65,7 +66,9 @@ __all__ = ["BATCH_KEYS", "Learner"]
 
 BATCH_KEYS = ("obs", "actions", "rewards", "terminated", "truncated", "final_obs", "next_obs")
 """Keys :meth:`Learner.update` reads from a batch (all time-major except ``next_obs``); a
-batch may add ``reward_parts (T, B, K)``, the reward's components, for ``split_rewards``."""
+batch may add ``reward_parts (T, B, K)``, the reward's components, for ``split_rewards``,
+and a recurrent model's needs ``memory (B, N, hidden)``, the memories at the rollout's start
+(:func:`~a2cm_phys.algos.recurrent.learner_inputs`)."""
 
 
 class Learner:
@@ -126,7 +129,10 @@ class Learner:
         """
         cfg, model = self.cfg, self.model
         obs = torch.as_tensor(np.asarray(batch["obs"]), device=self.device, dtype=torch.float32)
-        adv, targets, actor_adv = self._targets(batch, obs)
+        states = batch  # where the values are read: with recurrent actors, with memories
+        if model.recurrent:  # each observation with the memory it was acted on
+            obs, states = learner_inputs(model, obs, batch)
+        adv, targets, actor_adv = self._targets(batch, obs, states)
         losses = a2c_losses(
             model,
             self._critic,
@@ -148,15 +154,16 @@ class Learner:
 
     # ------------------------------------------------------------------ pieces
     def _targets(
-        self, batch: Mapping[str, Any], obs: torch.Tensor
+        self, batch: Mapping[str, Any], obs: torch.Tensor, states: Mapping[str, Any]
     ) -> tuple[np.ndarray, torch.Tensor, torch.Tensor]:
         """The batch's component advantages ``(T, B, C, K)`` (reward units), the critics'
-        targets and the actors' advantage ``(T, B, C)``; moves the value normaliser and the
-        multiplier on by this batch."""
+        targets and the actors' advantage ``(T, B, C)``, the values read from ``obs`` and
+        ``states`` (the batch, or its view with memories); moves the value normaliser and
+        the multiplier on by this batch."""
         rewards = self._rewards(batch)  # (T, B, 1 or K), scaled, float64
         with torch.no_grad():
             adv, targets = advantages_and_targets(
-                self._values, obs, batch, rewards, self.cfg, self.value_norm, self.model.critic_out
+                self._values, obs, states, rewards, self.cfg, self.value_norm, self.model.critic_out
             )
             actor_adv = self._actor_advantage(torch.as_tensor(adv, device=self.device))
             if self.cfg.constrain_collisions:  # dual ascent on λ (after it weighed this batch)

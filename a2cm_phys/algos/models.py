@@ -39,29 +39,18 @@ place (optimiser step, ``load_state_dict``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 import torch.nn.functional as F
-from torch import distributions as D
 from torch import nn
 
-from ..envs.core import REWARD_PARTS
-from ..envs.sensing import team_dim
-from .distributions import (
-    ActionDistribution,
-    CategoricalActions,
-    GaussianActions,
-)
+from .distributions import ActionDistribution, CategoricalActions
 from .encoding import OneHotCells
 from .layers import StackedLinear, stacked_mlp
 from .snapshot import ActorSnapshot
 
-if TYPE_CHECKING:
-    from ..config import Scenario, Train
-
-__all__ = ["ActorCritic", "SensedInputs", "make_model"]
+__all__ = ["ActorCritic", "SensedInputs", "agent_mlp", "critics", "input_view"]
 
 
 @dataclass(frozen=True)
@@ -85,7 +74,7 @@ class SensedInputs:
         return x[..., start : start + n * self.obs_dim].reshape(*x.shape[:-1], n, self.obs_dim)
 
 
-def _view(sensed: SensedInputs | None, obs, n: int, state: bool = False):
+def input_view(sensed: SensedInputs | None, obs, n: int, state: bool = False):
     """What a team's networks read of ``obs``, and whether one row per agent: the whole
     vector (sensing off), the global state (``state``: A2CM's critic), or each agent's own."""
     if sensed is None:
@@ -97,6 +86,15 @@ def _view(sensed: SensedInputs | None, obs, n: int, state: bool = False):
 
 def _features(encoding: OneHotCells | None, length: int) -> int:
     return length if encoding is None else encoding.features(length)
+
+
+def _input_sizes(obs_dim: int, encoding, sensed: SensedInputs | None, shared_critic: bool):
+    """How many numbers an actor and a critic read: the (encoded) observation, or with
+    sensing the agent's own, and A2CM's critic the state."""
+    inputs = critic = _features(encoding, obs_dim if sensed is None else sensed.obs_dim)
+    if sensed is not None and shared_critic:
+        critic = _features(encoding, sensed.state_dim)
+    return inputs, critic
 
 
 class ActorCritic(nn.Module):
@@ -114,7 +112,12 @@ class ActorCritic(nn.Module):
         layers: hidden layers of every actor and critic (the paper's: 1).
         encoding: the networks' input: the observation itself, or :class:`OneHotCells`.
         sensed: with sensing, where the agents' observations and the state lie in the input.
+        critic_memory: numbers each critic reads beside its input (a recurrent A2C critic:
+            its actor's memory, :mod:`~a2cm_phys.algos.recurrent`).
     """
+
+    recurrent = False
+    """Whether the actors carry a memory across steps (:mod:`~a2cm_phys.algos.recurrent`)."""
 
     def __init__(
         self,
@@ -130,6 +133,7 @@ class ActorCritic(nn.Module):
         layers: int = 1,
         encoding: OneHotCells | None = None,
         sensed: SensedInputs | None = None,
+        critic_memory: int = 0,
     ) -> None:
         super().__init__()
         if layers < 1:
@@ -140,9 +144,8 @@ class ActorCritic(nn.Module):
         self.shared_critic, self.n_values = shared_critic, n_values
         self.encoding, self.sensed = encoding, sensed
         c = critics(n_agents, shared_critic)
-        inputs = critic_inputs = _features(encoding, obs_dim if sensed is None else sensed.obs_dim)
-        if sensed is not None and shared_critic:
-            critic_inputs = _features(encoding, sensed.state_dim)
+        inputs, critic_inputs = _input_sizes(obs_dim, encoding, sensed, shared_critic)
+        critic_inputs += critic_memory
         # The creation order is the draw order of ``generator``: the paper's two layers of
         # the actors, then of the critics; layers beyond the first last, so that one layer
         # draws the paper's weights.
@@ -184,17 +187,13 @@ class ActorCritic(nn.Module):
 
     def actor_outputs(self, obs: torch.Tensor) -> torch.Tensor:
         """Actor outputs ``(..., N, n_outputs)`` (logits or means) for ``(..., obs_dim)``."""
-        x, own = _view(self.sensed, obs, self.n_agents)
-        return _mlp(self.actor_hidden, self.actor_deep, self.actor_out, self._input(x), own)
-
-    def distribution(self, obs: torch.Tensor) -> D.Distribution:
-        """The policy of every agent at ``obs``: a distribution of batch shape ``(..., N)``."""
-        return self.dist.torch(self.actor_outputs(obs), self.log_std)
+        x, own = input_view(self.sensed, obs, self.n_agents)
+        return agent_mlp(self.actor_hidden, self.actor_deep, self.actor_out, self._input(x), own)
 
     def value(self, obs: torch.Tensor) -> torch.Tensor:
         """Critic outputs ``(..., C)``, or ``(..., C, n_values)`` when ``n_values > 1``."""
-        x, own = _view(self.sensed, obs, self.n_agents, state=self.shared_critic)
-        out = _mlp(self.critic_hidden, self.critic_deep, self.critic_out, self._input(x), own)
+        x, own = input_view(self.sensed, obs, self.n_agents, state=self.shared_critic)
+        out = agent_mlp(self.critic_hidden, self.critic_deep, self.critic_out, self._input(x), own)
         return out.squeeze(-1) if self.n_values == 1 else out
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -203,26 +202,24 @@ class ActorCritic(nn.Module):
 
     # ------------------------------------------------------------------ fast rollout path
     def act(self, obs: np.ndarray, rng: np.random.Generator, greedy: bool = False) -> np.ndarray:
-        """One action per agent for each observation row, for rollouts (no autograd).
-
-        Args:
-            obs: ``(B, obs_dim)`` or ``(obs_dim,)`` observations (any float dtype).
-            rng: the only source of sampling randomness (unused when ``greedy``), so a
-                seeded generator gives a bit-exact run.
-            greedy: the most probable action (argmax, or the Gaussian's mean).
-
-        Returns:
-            Actions ``(B, N, *action_shape)`` (``(N, ...)`` for a 1-D ``obs``), int64 for
-            discrete actions, float32 (unclipped) for continuous ones.
+        """Actions ``(B, N, *action_shape)`` (``(N, ...)`` for a 1-D ``obs``) of observations
+        ``(B, obs_dim)`` for rollouts (no autograd): int64 for discrete actions, float32
+        (unclipped) for continuous ones. ``rng`` is the only randomness (unused when
+        ``greedy``: the argmax, or the Gaussian's mean), so a seeded one gives a bit-exact run.
         """
         out = self.outputs_np(obs)
         if greedy:
             return self.dist.greedy(out)
         return self.dist.sample(out, self._numpy_actors.log_std, rng)
 
+    def rollout_policy(self, greedy: bool = False):
+        """The actors as a rollout policy ``policy(obs, rng) -> actions`` (sampled, or the
+        most probable action); a recurrent model's keeps its memory between calls."""
+        return lambda obs, rng: self.act(obs, rng, greedy=greedy)
+
     def outputs_np(self, obs: np.ndarray) -> np.ndarray:
         """Actor outputs as numpy ``(B, N, n_outputs)`` (``(N, n_outputs)`` for 1-D ``obs``)."""
-        x = _view(self.sensed, np.asarray(obs, dtype=np.float32), self.n_agents)[0]
+        x = input_view(self.sensed, np.asarray(obs, dtype=np.float32), self.n_agents)[0]
         if self.encoding is not None:
             x = self.encoding.numpy(x)
         return self._numpy_actors.outputs(x)
@@ -250,7 +247,7 @@ class ActorCritic(nn.Module):
         return ActorSnapshot(*parts, per_agent=self.sensed is not None)
 
 
-def _mlp(first: StackedLinear, deep, last: StackedLinear, x: torch.Tensor, own: bool):
+def agent_mlp(first: StackedLinear, deep, last: StackedLinear, x: torch.Tensor, own: bool):
     """``n`` MLPs on one shared input (:func:`stacked_mlp`), or with ``own`` each on its own
     input row: ``(..., n, in) → (..., n, out)``."""
     if not own:
@@ -265,55 +262,3 @@ def critics(n_agents: int, shared_critic: bool) -> int:
     """How many critics a team of ``n_agents`` has: A2CM's one shared critic, or A2C's one
     per agent."""
     return 1 if shared_critic else n_agents
-
-
-def action_distribution(scenario: Scenario) -> ActionDistribution:
-    """The actors' distribution for a scenario: categorical over its discrete actions, or a
-    diagonal Gaussian over the 2-D velocity command of continuous control."""
-    if getattr(scenario, "control", "discrete") == "continuous":
-        return GaussianActions(2)
-    return CategoricalActions(scenario.actions)
-
-
-def make_model(
-    train_cfg: Train,
-    scenario: Scenario,
-    generator: torch.Generator | None = None,
-    *,
-    n_agents: int | None = None,
-    shared_critic: bool | None = None,
-) -> ActorCritic:
-    """Build the network a resolved ``train_cfg`` (:func:`~a2cm_phys.config.resolve_train`)
-    asks for, sized by ``scenario``, on its device.
-
-    ``n_agents`` defaults to the scenario's pursuers and ``shared_critic`` to A2CM's (a
-    team of one, such as a learned evader, passes its own). The initial weights come from
-    ``generator`` if given, otherwise from a torch generator seeded with ``train_cfg.seed``
-    (independent of the global torch RNG). With ``split_rewards`` each critic predicts one
-    value per reward component (:data:`~a2cm_phys.envs.core.REWARD_PARTS`). With sensing the
-    input is the team vector (:func:`~a2cm_phys.envs.sensing.team_dim`), and a team of one
-    (``n_agents = 1``) in a scenario with a learned evader is that evader: it reads its own
-    (last) slot.
-    """
-    if generator is None:
-        generator = torch.Generator().manual_seed(train_cfg.seed)
-    agents = scenario.pursuers if n_agents is None else n_agents
-    sensed = None
-    if scenario.sensing.on:
-        evader = n_agents == 1 and scenario.evader == "learned"  # the evader's slot is last
-        first = scenario.pursuers if evader else 0
-        sensed = SensedInputs(scenario.state_dim, scenario.obs_dim, first)
-    model = ActorCritic(
-        team_dim(scenario),
-        agents,
-        action_distribution(scenario),
-        train_cfg.hidden,
-        shared_critic=train_cfg.algo == "a2cm" if shared_critic is None else shared_critic,
-        n_values=len(REWARD_PARTS) if train_cfg.split_rewards else 1,
-        log_std_init=train_cfg.log_std_init,
-        generator=generator,
-        layers=train_cfg.layers,
-        encoding=OneHotCells(scenario.size) if train_cfg.encoding == "onehot" else None,
-        sensed=sensed,
-    )
-    return model.to(train_cfg.device)

@@ -21,7 +21,7 @@ from ..analysis.stats import describe
 from ..base.progress import Progress
 from ..config import ConfigError, Scenario
 from ..envs.vector import VectorEnv
-from ..training.rollout import Policy
+from ..training.rollout import Policy, episodes_ended
 from ..training.seeding import policy_rng
 
 __all__ = [
@@ -90,6 +90,11 @@ def play(
         else:
             step = env.step(actions, evader(obs, rng)[:, 0], validate=False)
         obs = step.obs
+        if step.episodes:
+            ended = step.terminated | step.truncated
+            episodes_ended(policy, ended)
+            if evader is not None:
+                episodes_ended(evader, ended)
         kept = 0
         for ep in step.episodes:
             if len(per_env[ep.env]) < quota[ep.env]:

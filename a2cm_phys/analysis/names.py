@@ -46,6 +46,20 @@ NAMED_POLICIES: tuple[NamedPolicy, ...] = (
         " evader is learned)",
     ),
     NamedPolicy("minimax", "pursuers", "the team optimal when the evader sees its move (grids)"),
+    NamedPolicy(
+        "qmdp", "pursuers",
+        "belief planning on the oracle's values: a Bayes filter over the evader's cell from"
+        " the team's pooled sightings (grids with sensing)",
+        no_table="qmdp acts on its belief, which the whole episode's sightings make, not on"
+        " the joint state alone, so it has no table over joint states",
+    ),
+    NamedPolicy(
+        "search", "pursuers",
+        "each pursuer sweeps its strip until the team sights the evader, then all chase it"
+        " (physics, continuous control, with sensing)",
+        no_table="search steers with velocity commands in physics and remembers its sweep,"
+        " so it has no table over the grid's joint states",
+    ),
     *(NamedPolicy(e, "evader", f"the scripted {e} evader") for e in SCRIPTED_EVADERS),
     NamedPolicy(
         "best-response", "evader", "the best response to the pursuers",

@@ -3,6 +3,12 @@ a caption for what happened (a capture, a collision, the time limit) and a legen
 (:func:`episode_picture`), a GIF that plays at the game's pace or a PNG contact sheet
 (:func:`save_picture`), and the file names a user would pick (:func:`picture_path`).
 
+In a sensing scenario (SPEC §6b) each frame also shows every pursuer's sensing range,
+faint in its colour (grids: the ``(2r + 1)²`` cells around it; physics: a disc of radius
+``r`` m), a line from each pursuer that knows the evader to it (solid when the evader is in
+its own range, dashed when a teammate told it), and the title names who knows the evader
+(:func:`sensing_overlay`). Without sensing the frames are as before.
+
 The pace: in physics one frame per control period (``physics.dt``: 1 s with discrete moves,
 0.1 s with continuous commands), on grids :data:`GRID_FRAME_SECONDS`, slow enough to follow
 each move; the last frame stays :data:`END_HOLD_SECONDS` so that the ending can be read.
@@ -17,7 +23,15 @@ import numpy as np
 
 from ..base.progress import Progress
 from ..config import Scenario
-from ..envs.render import DEFAULT_PIXELS, Contacts, render_rgb, step_contacts
+from ..envs.render import (
+    DEFAULT_PIXELS,
+    HEIGHT_RATIO,
+    PURSUER_COLOURS,
+    Contacts,
+    render_rgb,
+    step_contacts,
+)
+from ..record.masks import in_range, trajectory_masks
 from ..record.runlog import Trajectory
 
 GRID_FRAME_SECONDS = 0.5
@@ -28,6 +42,9 @@ MIN_FRAME_SECONDS = 0.02
 """The shortest frame GIF viewers honour (shorter ones they slow down to 0.1 s)."""
 DEFAULT_MAX_FRAMES = {"gif": 200, "png": 12}
 """Frames drawn at most by default: a GIF's, a contact sheet's."""
+RANGE_ALPHA = 0.14
+"""Opacity of a pursuer's sensing range: faint, so that the agents stay plain."""
+_WALL = 0.15  # the arena's drawn wall (m), as render_rgb draws it
 
 
 @dataclass
@@ -123,6 +140,66 @@ def frame_title(scenario: Scenario, traj: Trajectory, k: int, stride: float) -> 
     return f"{scenario.name} · episode {traj.episode}\n{line}"
 
 
+def sensing_title(scenario: Scenario, masks: np.ndarray) -> str:
+    """The title's third line in a sensing scenario: who knows the evader in this state."""
+    knowing = np.flatnonzero(np.asarray(masks)[: scenario.pursuers, -1])
+    if not len(knowing):
+        return "\nno pursuer knows where the evader is"
+    return f"\nthe evader is known to {_who(tuple(int(i) for i in knowing))}"
+
+
+def sensing_overlay(
+    scenario: Scenario, frame: np.ndarray, positions: np.ndarray, masks: np.ndarray
+) -> np.ndarray:
+    """``frame`` (a :func:`~a2cm_phys.envs.render.render_rgb` picture of ``positions``)
+    with the pursuers' sensing ranges and sightings drawn over it (see the module docs);
+    ``masks`` ``(N + 1, N + 1)`` are the state's. The overlay is drawn on a transparent
+    figure laid out as ``render_rgb`` lays out its arena, then blended in."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle, Rectangle
+
+    height, width = 4 * HEIGHT_RATIO, frame.shape[1]
+    fig = Figure(figsize=(4, height), dpi=width / 4)
+    fig.patch.set_alpha(0.0)
+    ax = fig.add_axes((0.05, 0.95 / height, 0.9, 3.6 / height))  # render_rgb's arena axes
+    size = scenario.size
+    ax.set_xlim(-_WALL, size + _WALL)
+    ax.set_ylim(-_WALL, size + _WALL)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    arena = Rectangle((0, 0), size, size, transform=ax.transData)
+    centres = np.asarray(positions, dtype=np.float64) + (0.5 if scenario.mode == "grid" else 0.0)
+    r, n = float(scenario.sensing.radius), scenario.pursuers
+    for i, (x, y) in enumerate(centres[:n]):
+        colour = PURSUER_COLOURS[i % len(PURSUER_COLOURS)]
+        if scenario.mode == "grid":
+            reach = np.floor(r) + 0.5  # whole cells within Chebyshev distance r
+            patch = Rectangle((x - reach, y - reach), 2 * reach, 2 * reach)
+        else:
+            patch = Circle((x, y), r)
+        patch.set(fc=colour, alpha=RANGE_ALPHA, lw=0)
+        ax.add_patch(patch)
+        patch.set_clip_path(arena)
+    own = in_range(scenario, positions)
+    for i in np.flatnonzero(np.asarray(masks)[:n, n]):
+        colour = PURSUER_COLOURS[i % len(PURSUER_COLOURS)]
+        (x, y), (ex, ey) = centres[i], centres[n]
+        style = (
+            {"ls": "-", "lw": 2.2, "alpha": 0.9}
+            if own[i]
+            else {"ls": "--", "lw": 1.4, "alpha": 0.6}
+        )
+        ax.plot([x, ex], [y, ey], color=colour, **style)
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    over = np.asarray(canvas.buffer_rgba()).astype(np.float64)
+    if over.shape[:2] != frame.shape[:2]:  # render_rgb's layout changed: never misplace
+        raise RuntimeError(f"sensing overlay {over.shape[:2]} != frame {frame.shape[:2]}")
+    alpha = over[..., 3:] / 255.0
+    return np.round(frame * (1 - alpha) + over[..., :3] * alpha).astype(np.uint8)
+
+
 def episode_picture(
     scenario: Scenario,
     traj: Trajectory,
@@ -136,8 +213,10 @@ def episode_picture(
     Physics episodes show each agent's path so far as a trail: every state up to the
     frame's, also those between frames, so a continuous path is drawn whole however few
     frames; a frame marks the contacts of the steps since the previous frame. ``progress``
-    counts the frames drawn on stderr."""
+    counts the frames drawn on stderr. A sensing scenario's frames show the ranges and
+    sightings (:func:`sensing_overlay`)."""
     steps = frame_steps(traj, max_frames)
+    masks = trajectory_masks(scenario, traj)
     stride = traj.length / max(len(steps) - 1, 1)
     trails = scenario.mode == "physics"
     picture = EpisodePicture(steps=steps, seconds=frame_seconds(scenario, traj, len(steps), fps))
@@ -148,17 +227,22 @@ def episode_picture(
             contacts = contacts_in(scenario, traj, previous, k)
             text, kind = caption(scenario, traj, k, contacts)
             vel = None if traj.velocities is None else traj.velocities[k]
+            title = frame_title(scenario, traj, k, stride)
+            if masks is not None:
+                title += sensing_title(scenario, masks[k])
             frame = render_rgb(
                 scenario,
                 traj.positions[k],
                 vel,
-                title=frame_title(scenario, traj, k, stride),
+                title=title,
                 pixels=pixels,
                 trail=traj.positions[:k] if trails else None,
                 contacts=contacts,
                 caption=text,
                 caption_kind=kind,
             )
+            if masks is not None:
+                frame = sensing_overlay(scenario, frame, traj.positions[k], masks[k])
             picture.frames.append(frame)
             picture.captions.append(text.replace("\u00a0", " "))
             previous = k

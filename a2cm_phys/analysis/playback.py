@@ -27,6 +27,7 @@ from ..deploy import ONNX_PREFIX, PRETRAINED_PREFIX
 from ..envs.vector import VecStep, VectorEnv
 from ..record.runlog import Trajectory
 from ..record.schemas import step_seconds
+from ..training.rollout import episodes_ended
 from ..training.seeding import policy_rng
 from .names import is_named
 from .policies import Matchup
@@ -111,6 +112,10 @@ def play_episodes(
                 running.add(actions, step)
                 obs = step.obs
                 if step.episodes:
+                    ended = step.terminated | step.truncated
+                    episodes_ended(game.pursuers, ended)
+                    if game.evader is not None:
+                        episodes_ended(game.evader, ended)
                     traj = running.trajectory(len(played), clock * dt, dt, scenario.continuous)
                     played.append(traj)
                     clock += traj.length

@@ -12,12 +12,25 @@
 - ``minimax``: the grid's minimax team (:mod:`a2cm_phys.solve.minimax`): deterministic,
   optimal when the evader sees its move, so no evader escapes it longer than the bound
   (grid mode only).
+- ``qmdp``: belief planning for partially observed grids (:mod:`a2cm_phys.analysis.qmdp`):
+  a Bayes filter over the evader's cell from the team's pooled sightings (never the state),
+  and each step the joint move best on average over the belief under the oracle's values
+  (grid scenarios with sensing only).
+- ``search``: a scripted sweep for partially observed continuous physics
+  (:mod:`a2cm_phys.analysis.search`): each pursuer sweeps its strip of the arena until the
+  team sights the evader, then all head for it (physics, continuous control, sensing only).
+
+``qmdp`` and ``search`` have memory: they are objects with ``episodes_ended`` (see
+:func:`~a2cm_phys.training.rollout.episodes_ended`), built anew for each evaluation.
 
 Evaders the solvers give (grid mode only): ``best-response``, the exact best response to the
 pursuers of the pairing, and ``equilibrium``, the game's equilibrium evader
 (:mod:`a2cm_phys.solve.nash`), which no team catches sooner on average than the game's value.
 
 Each is a :data:`~a2cm_phys.training.rollout.Policy`: ``policy(obs (B, obs_dim), rng) -> actions``.
+With sensing on (SPEC §6b) ``obs`` is the team vector: ``random``, ``pursuit``, ``oracle``
+and ``minimax`` are full-observation references and read its global-state prefix; ``qmdp``
+and ``search`` read only the pursuers' own slices.
 
 A :class:`Matchup` is one pairing to play: the game (its evader set to the evader's kind),
 the pursuers' policy, and a learned evader's policy where the evader is one (scripted
@@ -48,6 +61,8 @@ from .names import (
     SOLVED_EVADERS,
     oracle_evader,
 )
+from .qmdp import qmdp_policy
+from .search import search_policy
 
 
 def positions_from_obs(scenario: Scenario, obs: np.ndarray) -> np.ndarray:
@@ -107,8 +122,9 @@ class OraclePolicy:
         self.solution = solution or load_or_solve(self.scenario, cache_dir, progress=progress)
 
     def positions(self, obs: np.ndarray) -> np.ndarray:
-        """Integer cells ``(B, N + 1, 2)`` decoded from observations ``(B, obs_dim)``."""
-        obs = np.asarray(obs, dtype=np.float64)
+        """Integer cells ``(B, N + 1, 2)`` decoded from observations ``(B, obs_dim)`` (with
+        sensing, the team vector: its global-state prefix)."""
+        obs = np.asarray(obs, dtype=np.float64)[:, : self.scenario.state_dim]
         n, size = self.scenario.pursuers, self.scenario.size
         return np.rint(obs.reshape(len(obs), n + 1, 2) * (size - 1)).astype(np.int64)
 
@@ -163,14 +179,16 @@ def minimax_policy(scenario: Scenario, progress: bool = False) -> Policy:
         team = TablePolicy(twin, pursuer_source(twin, "minimax", progress=progress).table)
     except (TooLargeError, UnsupportedError) as err:
         raise ConfigError(f"minimax policy: {err}") from None
-    return lambda obs, rng: team.act(obs, rng, greedy=True)
+    state = slice(0, scenario.state_dim)  # with sensing, the team vector's state prefix
+    return lambda obs, rng: team.act(np.asarray(obs)[:, state], rng, greedy=True)
 
 
 def pursuer_policy(name: str, scenario: Scenario, progress: bool = False) -> Policy:
     """The named pursuer policy for ``scenario`` (one of :data:`PURSUER_POLICIES`;
-    ``progress``: report a solver's progress on stderr)."""
-    solved = {"oracle": oracle_policy, "minimax": minimax_policy}
-    scripted = {"random": random_policy, "pursuit": pursuit_policy}
+    ``progress``: report a solver's progress on stderr). A policy with memory (``qmdp``,
+    ``search``) is a new object at each call: give each evaluation its own."""
+    solved = {"oracle": oracle_policy, "minimax": minimax_policy, "qmdp": qmdp_policy}
+    scripted = {"random": random_policy, "pursuit": pursuit_policy, "search": search_policy}
     if name in solved:
         return solved[name](scenario, progress)
     if name not in scripted:

@@ -108,6 +108,7 @@ def pursuer_source(
     ``evaluate`` plays it). Raises :class:`SourceError`, or the solvers' TooLargeError /
     UnsupportedError.
     """
+    check_tabled(spec, "pursuers")
     n = scenario.pursuers
     if spec == "random":
         return Source(uniform_table(scenario, n), "uniformly random pursuers")

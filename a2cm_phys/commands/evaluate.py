@@ -163,10 +163,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--reference",
-        choices=["oracle", "pursuit", "random", "none"],
+        choices=["oracle", "pursuit", "random", "qmdp", "search", "none"],
         help="what to show beside the result (default: the oracle: on grids its exact"
         " optimum, in physics with discrete moves played in the arena; under continuous"
-        " control the pursuit policy, played)",
+        " control the pursuit policy, played; with sensing also qmdp (grids) or search"
+        " (continuous control), played)",
     )
     p.add_argument(
         "--cross-play",

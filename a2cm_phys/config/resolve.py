@@ -173,7 +173,22 @@ def check_train(scenario: Scenario, cfg: Train) -> None:
             " (use grid_vs, phys_vs or phys_cont_vs, or pool_every = 0)"
         )
     _check_descent(scenario, cfg)
+    _check_recurrent(cfg)
     check_network_size(scenario, cfg)
+
+
+def _check_recurrent(cfg: Train) -> None:
+    """Recurrent actors act through their memory: what reads a team's policy state by state
+    (the pool of past opponents, exploitability and its descent) cannot use them yet."""
+    if cfg.recurrent == "none":
+        return
+    for key in ("pool_every", "exploit_every", "descent_every"):
+        if getattr(cfg, key):
+            raise ConfigError(
+                f"training options: keys 'recurrent', '{key}': recurrent actors act on"
+                f" what they remember, and {key} reads a policy state by state; use"
+                f" recurrent = 'none' or {key} = 0"
+            )
 
 
 def _check_descent(scenario: Scenario, cfg: Train) -> None:
@@ -221,7 +236,7 @@ def network_inputs(scenario: Scenario, cfg: Train, width: int | None = None) -> 
 
 def network_weights(scenario: Scenario, cfg: Train) -> int:
     """How many weights (parameters) the networks of a run of ``cfg`` on ``scenario`` have,
-    counted as :func:`~a2cm_phys.algos.models.make_model` builds them, without building
+    counted as :func:`~a2cm_phys.algos.build.make_model` builds them, without building
     them: every pursuer's actor, the critics (one with A2CM, one per pursuer with A2C), a
     learned evader's actor and critic, each of ``layers`` hidden layers of ``hidden``
     units over the observation (or its one-hot cells, ``encoding = "onehot"``)."""
@@ -233,9 +248,14 @@ def network_weights(scenario: Scenario, cfg: Train) -> int:
     def stack(n: int, fan_in: int, fan_out: int) -> int:  # a StackedLinear layer
         return n * (fan_in * fan_out + fan_out)
 
-    def team(agents: int, critics: int, values: int, seen: int) -> int:
+    memory = cfg.recurrent != "none"
+
+    def team(agents: int, critics: int, values: int, seen: int, own: bool = True) -> int:
         actors = stack(agents, inputs, hidden) + deep * stack(agents, hidden, hidden)
         actors += stack(agents, hidden, outputs) + agents * log_std
+        if memory:  # a GRU cell per actor; A2C's critics also read their actor's memory
+            actors += 2 * stack(agents, hidden, 3 * hidden)
+            seen += hidden if own else 0
         critic = stack(critics, seen, hidden) + deep * stack(critics, hidden, hidden)
         return actors + critic + stack(critics, hidden, values)
 
@@ -243,7 +263,7 @@ def network_weights(scenario: Scenario, cfg: Train) -> int:
     # with sensing, A2CM's one critic reads the global state (centralised training)
     shared = network_inputs(scenario, cfg, scenario.state_dim)
     critics, seen = (1, shared) if cfg.algo == "a2cm" else (n, inputs)
-    weights = team(n, critics, 2 if cfg.split_rewards else 1, seen)
+    weights = team(n, critics, 2 if cfg.split_rewards else 1, seen, cfg.algo == "a2c")
     if scenario.evader == "learned":  # an A2C team of one on one reward (teams.py)
         weights += team(1, 1, 1, inputs)
     return weights

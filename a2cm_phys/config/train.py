@@ -13,6 +13,7 @@ Optimizer = Literal["rmsprop", "adam"]
 Schedule = Literal["constant", "linear"]
 Encoding = Literal["xy", "onehot"]
 DescentTeams = Literal["pursuers", "both"]
+Recurrent = Literal["none", "gru"]
 
 
 @dataclass(frozen=True)
@@ -49,6 +50,9 @@ class Train:
     hidden: int = 128
     layers: int = 1  # hidden layers of every actor and critic (the paper's: 1)
     encoding: Encoding = "xy"  # the networks' input: the observation, or one-hot cells (grid)
+    # "gru": each actor carries a GRU state across an episode (algos/recurrent.py), learnt by
+    # back-propagation through each rollout (batch_size / num_envs steps)
+    recurrent: Recurrent = "none"
     reward_scale: float = 1.0
     max_grad_norm: float | None = None  # None: by the control type (CONTROL_DEFAULTS); 0: off
     device: str = "cpu"

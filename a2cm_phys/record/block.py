@@ -7,8 +7,10 @@ import json
 
 import numpy as np
 
+from ..config import Scenario
 from .buffers import StepBuffers
 from .jsontext import json_array, json_float_rows, json_number, json_object, json_rows, json_value
+from .masks import masks_of, packed
 from .runlog import Trajectory
 
 
@@ -26,7 +28,9 @@ def _take(buffer: np.ndarray, flat: np.ndarray) -> np.ndarray:
 class Block:
     """Episodes gathered from ``buf``: episode ``j`` ran in game ``env[j]`` from buffer row
     ``begin[j]`` (its start state) for ``length[j]`` steps. ``dt`` is the simulated seconds
-    per step; ``events`` each episode's contact events (``None`` in grid mode)."""
+    per step; ``events`` each episode's contact events (``None`` in grid mode). With a
+    sensing ``scenario``, each state's sensing masks are computed from its positions
+    (:mod:`.masks`); without one, or without sensing, there are none."""
 
     def __init__(
         self,
@@ -38,6 +42,7 @@ class Block:
         length: np.ndarray,
         events: list[list | None],
         dt: float,
+        scenario: Scenario | None = None,
     ) -> None:
         self.ids, self.env, self.seed, self.length, self.events = ids, env, seed, length, events
         self.dt = dt
@@ -61,6 +66,7 @@ class Block:
         self.captured = _take(buf.captured, flat)
         self.col = _take(buf.col, flat)
         self.wall = _take(buf.wall, flat)
+        self.sensed = None if scenario is None else masks_of(scenario, self.pos)
 
     def json(self, t0: np.ndarray) -> bytes:
         """The ``/episodes/trajectories`` message of these episodes."""
@@ -92,6 +98,8 @@ class Block:
             fields["events"] = json.dumps(
                 [e or [] for e in self.events], separators=(",", ":"), default=json_value
             ).encode()
+        if self.sensed is not None:
+            fields["sensed"] = json_rows(packed(self.sensed))
         return json_object(**fields)
 
     def trajectory(self, t0: float) -> Trajectory:
@@ -112,4 +120,5 @@ class Block:
             velocities=None if self.vel is None else self.vel[: length + 1],
             events=None if self.events[0] is None else [tuple(e) for e in self.events[0]],
             evader_reward=None if self.erew is None else self.erew[:length],
+            sensed=None if self.sensed is None else self.sensed[: length + 1],
         )

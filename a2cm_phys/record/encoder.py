@@ -77,8 +77,11 @@ class _Columns:
                 "(record_step every step?)"
             )
 
-    def block(self, buf: StepBuffers, sel: np.ndarray, dt: float) -> Block:
-        """The episodes at rows ``sel`` gathered from ``buf``."""
+    def block(
+        self, buf: StepBuffers, sel: np.ndarray, dt: float, scenario: Scenario | None = None
+    ) -> Block:
+        """The episodes at rows ``sel`` gathered from ``buf`` (with ``scenario``'s sensing
+        masks, if it has sensing)."""
         events = [self.events[i] for i in sel]
         return Block(
             buf,
@@ -89,6 +92,7 @@ class _Columns:
             self.length[sel],
             events,
             dt,
+            scenario,
         )
 
 
@@ -131,12 +135,14 @@ class EpisodeEncoder:
         logged = cols.whole & (cols.ids % max(every, 1) == 0) & (every > 0)
         if logged.any():
             sel = np.flatnonzero(logged)
-            yield TRAJECTORY_TOPIC, log_time, cols.block(buf, sel, self.dt).json(cols.t0[sel])
+            block = cols.block(buf, sel, self.dt, self.scenario)
+            yield TRAJECTORY_TOPIC, log_time, block.json(cols.t0[sel])
         if self.scene_every:
             from .scene import episode_scenes  # the Foxglove SDK, loaded only to draw
 
             for i in np.flatnonzero(cols.whole & (cols.ids % self.scene_every == 0)):
-                traj = cols.block(buf, np.array([i]), self.dt).trajectory(float(cols.t0[i]))
+                block = cols.block(buf, np.array([i]), self.dt, self.scenario)
+                traj = block.trajectory(float(cols.t0[i]))
                 topic = scene_topic(traj.env)
                 for time_ns, data in episode_scenes(self.scenario, traj):
                     yield topic, time_ns, data

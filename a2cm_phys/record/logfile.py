@@ -57,12 +57,18 @@ def log_metadata(
 
 class LogFile:
     """The MCAP file at ``path``, begun with ``metadata`` and every fixed channel (see the
-    module docs). ``channels`` maps topics to channel ids; ``add`` writes a message; a chunk
-    should be closed when it holds ``chunk_bytes`` and when it is ``due``, ``flush_seconds``
-    after the previous one was (or after the file was begun)."""
+    module docs; ``schemas``: the fixed channels' schemas, by default
+    :data:`.schemas.SCHEMAS`). ``channels`` maps topics to channel ids; ``add`` writes a
+    message; a chunk should be closed when it holds ``chunk_bytes`` and when it is ``due``,
+    ``flush_seconds`` after the previous one was (or after the file was begun)."""
 
     def __init__(
-        self, path: Path, metadata: dict[str, str], chunk_bytes: int, flush_seconds: float
+        self,
+        path: Path,
+        metadata: dict[str, str],
+        chunk_bytes: int,
+        flush_seconds: float,
+        schemas: dict[str, dict[str, Any]] | None = None,
     ) -> None:
         self.path, self.chunk_bytes, self.flush_seconds = path, chunk_bytes, flush_seconds
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -71,7 +77,7 @@ class LogFile:
             self._writer = Writer(self._fh, chunk_size=1 << 62, compression=CompressionType.ZSTD)
             self._writer.start(library=f"a2cm_phys {__version__}")
             self._writer.add_metadata(METADATA_NAME, metadata)
-            self.channels = Channels(self._writer)
+            self.channels = Channels(self._writer, schemas)
             self.sync()
         except OSError as err:  # e.g. a full disk: leave no unreadable part behind
             self._fh.close()

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..base.errors import UserError
 from ..config import ConfigError, Scenario, build
+from .masks import unpacked
 from .schemas import SUMMARY_SCHEMA
 
 
@@ -33,7 +34,10 @@ class Trajectory:
     ``actions`` are ``(L, N + 1)`` int64 moves, or with continuous control ``(L, N + 1, 2)``
     float64 commands, exactly as given to the env (before clipping). ``dt`` is the simulated
     seconds per step (the control period). ``evader_reward`` is a learned evader's reward
-    per step (``None`` with a scripted evader, or in a log older than format 2)."""
+    per step (``None`` with a scripted evader, or in a log older than format 2). ``sensed``
+    holds each state's sensing masks (SPEC §6b; ``[k, i, j]``: agent ``i`` knows body ``j``
+    in state ``k``), in logs of sensing scenarios written since the masks were logged
+    (``None`` otherwise; :func:`.masks.trajectory_masks` recomputes them)."""
 
     episode: int
     env: int
@@ -49,6 +53,7 @@ class Trajectory:
     velocities: np.ndarray | None = None  # (L + 1, N + 1, 2), physics only
     events: list[tuple[str, str, str, int]] | None = None  # physics only
     evader_reward: np.ndarray | None = None  # (L,) float64, learned evader only
+    sensed: np.ndarray | None = None  # (L + 1, N + 1, N + 1) bool, sensing scenarios only
 
     @property
     def continuous(self) -> bool:
@@ -80,6 +85,8 @@ class Trajectory:
         collisions = np.asarray(doc["collisions"], dtype=np.int64)
         walls = np.asarray(doc["wall_contacts"], dtype=np.int64)
         events = doc.get("events")
+        masks = doc.get("sensed")
+        masks = None if masks is None else unpacked(np.asarray(masks, dtype=np.int64))
         out = []
         for j, length in enumerate(lengths.tolist()):
             a, b = states[j] - length - 1, states[j]
@@ -100,6 +107,7 @@ class Trajectory:
                     velocities=None if vel is None else vel[a:b],
                     events=None if events is None else [tuple(e) for e in events[j]],
                     evader_reward=None if evader_reward is None else evader_reward[c:d],
+                    sensed=None if masks is None else masks[a:b],
                 )
             )
         return out

@@ -6,7 +6,10 @@ sphere, each agent's trail, a caption, velocity arrows in physics mode, and the 
 the step that led to it), so seeking anywhere shows the full scene. Entities keep fixed ids
 (``arena``, ``pursuer_0`` …, ``evader``, ``trails``, ``contacts``), so each frame replaces
 the previous one; ``contacts`` is empty except on the frame of a capture (a ring around the
-evader) or a collision (a marker between the two pursuers), so contacts flash. Units are
+evader) or a collision (a marker between the two pursuers), so contacts flash. In a
+sensing scenario (SPEC §6b) an entity ``sensing`` (:func:`sensing_primitives`) draws each
+pursuer's range faintly and a line from each pursuer that knows the evader to it; without
+sensing there is no such entity and the frames are as before. Units are
 metres in frame ``arena``: a grid cell ``(x, y)`` is drawn at its centre
 ``(x + 0.5, y + 0.5)``, as in :mod:`a2cm_phys.envs.render`.
 """
@@ -21,6 +24,7 @@ from foxglove.messages import (
     ArrowPrimitive,
     Color,
     CubePrimitive,
+    CylinderPrimitive,
     LinePrimitive,
     LinePrimitiveLineType,
     Point3,
@@ -37,6 +41,7 @@ from foxglove.messages import (
 from ..config import Scenario
 from ..envs.core import agent_names
 from ..envs.render import EVADER_COLOUR, PURSUER_COLOURS, step_contacts
+from .masks import in_range, state_masks
 from .runlog import Trajectory
 
 FRAME_ID = "arena"
@@ -47,6 +52,7 @@ TRAIL_STATES = 40
 _WALL = 0.15  # drawn wall thickness (m)
 _WALL_HEIGHT = 0.3
 _CAPTURE_COLOUR = "#f2b701"
+_RANGE_ALPHA = 0.12  # a pursuer's sensing range: faint, the agents stay in front
 _COLLISION_COLOUR = "#ffe600"
 
 
@@ -208,6 +214,74 @@ def _contact_marks(scenario: Scenario, centres: np.ndarray, contacts) -> dict[st
     return marks
 
 
+def _range(scenario: Scenario, i: int, x: float, y: float) -> dict[str, list]:
+    """Pursuer ``i``'s sensing range around its centre ``(x, y)``: on grids a flat square
+    over the ``(2r + 1)²`` cells around its cell (within the arena), in physics a disc of
+    radius ``r`` m with its rim."""
+    colour = PURSUER_COLOURS[i % len(PURSUER_COLOURS)]
+    r, size = float(scenario.sensing.radius), float(scenario.size)
+    if scenario.mode == "grid":
+        reach = np.floor(r) + 0.5  # whole cells: Chebyshev distance <= r
+        x0, x1 = max(x - reach, 0.0), min(x + reach, size)
+        y0, y1 = max(y - reach, 0.0), min(y + reach, size)
+        square = (x1 - x0, y1 - y0, 0.004)
+        return {
+            "cubes": [
+                _cube((x0 + x1) / 2, (y0 + y1) / 2, 0.004, square, _rgba(colour, _RANGE_ALPHA))
+            ]
+        }
+    disc = CylinderPrimitive(
+        pose=_pose(x, y, 0.004),
+        size=Vector3(x=2 * r, y=2 * r, z=0.004),
+        bottom_scale=1.0,
+        top_scale=1.0,
+        color=_rgba(colour, _RANGE_ALPHA),
+    )
+    rim = [
+        Point3(x=float(x + r * np.cos(a)), y=float(y + r * np.sin(a)), z=0.01)
+        for a in np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    ]
+    line = LinePrimitive(
+        type=LinePrimitiveLineType.LineLoop,
+        pose=_pose(0, 0, 0),
+        thickness=0.03,
+        points=rim,
+        color=_rgba(colour, 0.5),
+    )
+    return {"cylinders": [disc], "lines": [line]}
+
+
+def sensing_primitives(
+    scenario: Scenario, positions: np.ndarray, masks: np.ndarray
+) -> dict[str, list]:
+    """The ``sensing`` entity's primitives for a state of a sensing scenario: each pursuer's
+    range (:func:`_range`), and a line from each pursuer that knows the evader (``masks``
+    ``(N + 1, N + 1)``) to it: opaque when the evader is in its own range, faint when it
+    knows it from a teammate (``share``)."""
+    centres = centres_of(scenario, positions)
+    n = scenario.pursuers
+    prims: dict[str, list] = {"cubes": [], "cylinders": [], "lines": []}
+    for i in range(n):
+        for kind, items in _range(scenario, i, *map(float, centres[i])).items():
+            prims[kind] += items
+    own = in_range(scenario, positions)
+    ex, ey = map(float, centres[n])
+    z = scenario.physics.box_side / 2
+    for i in np.flatnonzero(np.asarray(masks)[:n, n]):
+        x, y = map(float, centres[i])
+        colour = PURSUER_COLOURS[i % len(PURSUER_COLOURS)]
+        prims["lines"].append(
+            LinePrimitive(
+                type=LinePrimitiveLineType.LineStrip,
+                pose=_pose(0, 0, 0),
+                thickness=0.06 if own[i] else 0.03,
+                points=[Point3(x=x, y=y, z=z), Point3(x=ex, y=ey, z=z)],
+                color=_rgba(colour, 0.9 if own[i] else 0.35),
+            )
+        )
+    return prims
+
+
 def centres_of(scenario: Scenario, positions: np.ndarray) -> np.ndarray:
     """Positions ``(…, N + 1, 2)`` in metres: cell centres in grid mode."""
     centres = np.asarray(positions, dtype=np.float64)
@@ -222,10 +296,12 @@ def scene_update(
     velocities: np.ndarray | None = None,
     trail: np.ndarray | None = None,
     contacts: object | None = None,
+    sensing: np.ndarray | None = None,
 ) -> SceneUpdate:
     """One SceneUpdate of a game's ``positions`` ``(N + 1, 2)``; ``trail`` the states that
     led there ``(T, N + 1, 2)`` (the last one ``positions``), ``contacts`` the
-    :class:`~a2cm_phys.envs.render.Contacts` of the step that led there."""
+    :class:`~a2cm_phys.envs.render.Contacts` of the step that led there, ``sensing`` the
+    state's sensing masks ``(N + 1, N + 1)`` (a sensing scenario: ranges and sightings)."""
     stamp = _stamp(time_ns)
     centres = centres_of(scenario, positions)
     cubes, lines = _arena(scenario.size)
@@ -243,12 +319,16 @@ def scene_update(
     drawn = centres[None] if trail is None else centres_of(scenario, trail)
     entities.append(_entity("trails", stamp, lines=_trails(drawn, 0.02)))
     entities.append(_entity("contacts", stamp, **_contact_marks(scenario, centres, contacts)))
+    if sensing is not None:
+        prims = sensing_primitives(scenario, positions, sensing)
+        entities.append(_entity("sensing", stamp, **prims))
     return SceneUpdate(entities=entities)
 
 
 def episode_frame(scenario: Scenario, traj: Trajectory, k: int, time_ns: int) -> SceneUpdate:
     """The SceneUpdate of state ``k`` of an episode (0: its start), stamped ``time_ns``:
-    a caption with the return so far, the trails that led there, the step's contacts."""
+    a caption with the return so far, the trails that led there, the step's contacts (and
+    in a sensing scenario the state's ranges and sightings)."""
     contacts, status = None, ""
     if k and (traj.captured[k - 1] or traj.collisions[k - 1]):
         before, after = traj.positions[k - 1], traj.positions[k]
@@ -259,7 +339,8 @@ def episode_frame(scenario: Scenario, traj: Trajectory, k: int, time_ns: int) ->
     caption = f"episode {traj.episode}  step {k}/{traj.length}  return {ret:g}{status}"
     vel = None if traj.velocities is None else traj.velocities[k]
     trail = traj.positions[max(0, k + 1 - TRAIL_STATES) : k + 1]
-    return scene_update(scenario, traj.positions[k], time_ns, caption, vel, trail, contacts)
+    masks = state_masks(scenario, traj, k)
+    return scene_update(scenario, traj.positions[k], time_ns, caption, vel, trail, contacts, masks)
 
 
 def episode_frames(scenario: Scenario, traj: Trajectory) -> Iterator[tuple[int, SceneUpdate]]:

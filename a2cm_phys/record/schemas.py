@@ -35,7 +35,10 @@ Format versions (metadata ``format``; :mod:`.reader` reads both):
 - ``a2cm_phys.episodes/1``: integer actions only; one step = 1 s.
 - ``a2cm_phys.episodes/2``: continuous commands as float actions; ``dt`` and the clock
   follow the control period; a learned evader's reward and return (``evader_reward``,
-  ``evader_return``); sparse update metrics (``exploit_*``) documented.
+  ``evader_return``); sparse update metrics (``exploit_*``) documented. Since added, in
+  sensing scenarios only (SPEC §6b): the sensing masks of every state (``sensed``, see
+  :data:`SENSED_FIELD` and :mod:`.masks`); their trajectory schema is
+  :func:`trajectory_schema`'s, with the field; other logs are as before, byte for byte.
 """
 
 from __future__ import annotations
@@ -160,7 +163,27 @@ TRAJECTORY_SCHEMA: dict[str, Any] = {
         "wall_contacts",
     ],
 }
-"""Schema of :data:`TRAJECTORY_TOPIC` messages."""
+"""Schema of :data:`TRAJECTORY_TOPIC` messages (without sensing; see :func:`trajectory_schema`)."""
+
+SENSED_FIELD: dict[str, Any] = _rows(
+    "integer",
+    "sensing scenarios only; state rows: what each agent knows in that state (SPEC 6b), "
+    "N + 1 integers, the pursuers in order then the evader: bit j (value 2^j) of agent i's "
+    "integer is set when agent i knows body j (bodies: pursuers 0..N-1, then the evader N; "
+    "its own bit is always set), as envs.sensing.sensed() gives it from the row's positions",
+)
+"""The ``sensed`` field of a sensing scenario's trajectory blocks (:mod:`.masks`)."""
+
+
+def trajectory_schema(scenario: Scenario) -> dict[str, Any]:
+    """The trajectory schema of ``scenario``'s log: :data:`TRAJECTORY_SCHEMA`, with the
+    ``sensed`` field (required) when the scenario has sensing."""
+    if not scenario.sensing.on:
+        return TRAJECTORY_SCHEMA
+    schema = {**TRAJECTORY_SCHEMA, "required": [*TRAJECTORY_SCHEMA["required"], "sensed"]}
+    schema["properties"] = {**TRAJECTORY_SCHEMA["properties"], "sensed": SENSED_FIELD}
+    return schema
+
 
 SUMMARY_SCHEMA: dict[str, Any] = {
     "title": "a2cm_phys.EpisodeSummaryBlock",
@@ -323,7 +346,13 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     PLOT_UPDATE_TOPIC: UPDATE_POINT_SCHEMA,
 }
 """Schema of each fixed topic (JSON; the scene topics hold the Foxglove SDK's protobuf
-``foxglove.SceneUpdate``, see :mod:`.sdk`)."""
+``foxglove.SceneUpdate``, see :mod:`.sdk`); a sensing scenario's log: :func:`schemas_for`."""
+
+
+def schemas_for(scenario: Scenario) -> dict[str, dict[str, Any]]:
+    """The fixed topics' schemas in ``scenario``'s log: :data:`SCHEMAS`, with
+    :func:`trajectory_schema` for the trajectories."""
+    return {**SCHEMAS, TRAJECTORY_TOPIC: trajectory_schema(scenario)}
 
 
 def schema_bytes(schema: dict[str, Any]) -> bytes:

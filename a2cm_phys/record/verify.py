@@ -5,9 +5,11 @@ in the log: the pursuers' (moves, or continuous commands fed back exactly as the
 given, so the env clips them again the same way), and a learned evader's (given as the
 step's ``evader_actions``). It is compared step by step (positions, velocities, the evader's
 actions, rewards, a learned evader's rewards, captures, collisions, wall contacts, contact
-events, the episode's end), bit for bit; then the episode's summary is checked against the
-trajectory (env, seed, length, return, a learned evader's return, captured, truncated,
-ended by a collision, collisions, wall contacts), so that a changed summary is caught too.
+events, the episode's end, and in a sensing scenario's log the sensing masks, recomputed
+from the re-simulated positions with :func:`a2cm_phys.envs.sensing.sensed`), bit for bit;
+then the episode's summary is checked against the trajectory (env, seed, length, return,
+a learned evader's return, captured, truncated, ended by a collision, collisions, wall
+contacts), so that a changed summary is caught too.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from ..base.progress import Progress
 from ..config import Scenario
 from ..envs.core import evader_reward
 from ..envs.factory import make_core
+from .masks import masks_of, packed
 from .runlog import RunLog, Trajectory
 
 
@@ -34,7 +37,29 @@ def verify_trajectory(
         return f"the log holds {kind}, but scenario {scenario.name} has {scenario.control} control"
     sim, sim_events = _resimulate(scenario, traj, core)
     logged = _logged(traj, scenario.pursuers)
-    return _first_divergence(sim, logged) or _event_divergence(traj, sim_events)
+    problem = _add_masks(scenario, traj, sim, logged)
+    return problem or _first_divergence(sim, logged) or _event_divergence(traj, sim_events)
+
+
+def _add_masks(
+    scenario: Scenario,
+    traj: Trajectory,
+    sim: dict[str, np.ndarray],
+    logged: dict[str, np.ndarray | None],
+) -> str | None:
+    """Add the sensing masks, re-simulated and logged (as the log's integers), to the
+    values compared, if the log holds them (older logs do not); a description if they
+    cannot be compared (the wrong shape, or masks in a log of a scenario without sensing)."""
+    if traj.sensed is None:
+        return None
+    if not scenario.sensing.on:
+        return f"the log holds sensing masks, but scenario {scenario.name} has no sensing"
+    sim["sensing masks"] = packed(masks_of(scenario, sim["positions"]))
+    logged["sensing masks"] = packed(traj.sensed)
+    if logged["sensing masks"].shape != sim["sensing masks"].shape:
+        shape = logged["sensing masks"].shape
+        return f"sensing masks of shape {shape}, expected {sim['sensing masks'].shape}"
+    return None
 
 
 def _resimulate(
@@ -105,6 +130,10 @@ def _logged(traj: Trajectory, pursuers: int) -> dict[str, np.ndarray | None]:
     }
 
 
+_STATES = ("positions", "velocities", "sensing masks")
+"""The values compared per state (row 0 the start), not per step."""
+
+
 def _first_divergence(
     sim: dict[str, np.ndarray], logged: dict[str, np.ndarray | None]
 ) -> str | None:
@@ -116,7 +145,7 @@ def _first_divergence(
         differs = _differs(log_values, sim_values, bitwise=name == "evader action")
         if differs.any():
             k = int(np.argmax(differs))
-            state = name in ("positions", "velocities")  # row k is the state after k steps
+            state = name in _STATES  # row k is the state after k steps
             step = k if state else k + 1
             if first is None or step < first[0]:
                 first = (step, _divergence((name, step, log_values[k], sim_values[k])))

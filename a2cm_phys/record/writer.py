@@ -29,7 +29,7 @@ from ..envs.vector import VecStep, VectorEnv
 from .encoder import EpisodeEncoder
 from .episode_rows import EpisodeRows
 from .logfile import LogFile, log_metadata
-from .schemas import PLOT_EVERY
+from .schemas import PLOT_EVERY, schemas_for
 from .updates import StepRate, update_messages
 
 
@@ -67,7 +67,7 @@ class EpisodeRecorder:
         self.dt, self._step_ns = self._encoder.dt, self._encoder.step_ns
         user = {**(metadata or {}), "plot_every": plot_every}
         meta = log_metadata(scenario, user, log_every, scene_every, self.dt)
-        self._file = LogFile(self.path, meta, chunk_bytes, flush_seconds)
+        self._file = LogFile(self.path, meta, chunk_bytes, flush_seconds, schemas_for(scenario))
         self._vec: VectorEnv | None = None
         self._rows: EpisodeRows | None = None  # the step buffers, from start() on
         self._finished = 0  # episodes queued so far (ids are given in finishing order)

@@ -22,10 +22,23 @@ from ..envs.core import REWARD_PARTS, reward_parts
 from ..envs.vector import EpisodeSummary, VecStep, VectorEnv
 
 Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
-"""``policy(obs (B, obs_dim), rng) -> actions (B, N, *action_shape)``."""
+"""``policy(obs (B, obs_dim), rng) -> actions (B, N, *action_shape)``.
+
+A policy with memory (a recurrent team, a belief planner) also has a method
+``episodes_ended(ended (B,) bool)``: whoever steps the games calls it after every step
+(:func:`episodes_ended`), and the policy forgets the games whose episode just ended, since
+their next observation starts a new one."""
 
 StepHook = Callable[[np.ndarray, VecStep], None]
 """``hook(actions, step)``, called after every vector step (e.g. the episode recorder)."""
+
+
+def episodes_ended(policy: Policy, ended: np.ndarray) -> None:
+    """Tell ``policy``, if it has memory (an ``episodes_ended`` method), which games'
+    episodes ended in the step just taken (``(B,)`` bool: terminated or truncated)."""
+    forget = getattr(policy, "episodes_ended", None)
+    if forget is not None:
+        forget(ended)
 
 
 def allocate_batch(
@@ -111,6 +124,10 @@ def collect(
         b_final[t] = step.final_obs
         if step.episodes:
             episodes.extend(step.episodes)
+            ended = step.terminated | step.truncated
+            episodes_ended(policy, ended)
+            if evader is not None:
+                episodes_ended(evader[0], ended)
         if on_step is not None:
             on_step(actions, step)
         obs = step.obs

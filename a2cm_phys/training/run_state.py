@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from ..config import to_dict
 from .episode_stats import EpisodeStats
 from .state import ROLLOUT, RunState
@@ -30,6 +32,7 @@ def capture(run: RunState) -> dict[str, Any]:
         "env": run.env.state(),
         "stats": run.stats.state(),
         "wall_time": run.wall_time(),
+        "memory": _memories(run, lambda team: team.policy.start(len(team.batch["memory"]))),
         # the log is durable up to this episode count when the checkpoint is written
         "log": {
             "record": run.record,
@@ -55,6 +58,18 @@ def restore(run: RunState, state: dict[str, Any]) -> None:
     run.stats = EpisodeStats.from_state(state["stats"])
     run.update = run.saved_update = int(state["update"])
     run.clock.resume(float(state["wall_time"]))
+    memory = state.get("memory") or {}
+    fresh = state["env"].get("core") is None  # every game restarted: nothing to remember
+    for team in (run.pursuers, run.evader):
+        if team is not None and team.model.recurrent:
+            kept = np.asarray(memory[team.name], dtype=np.float32)
+            team.policy.start(len(kept))[:] = 0.0 if fresh else kept
+
+
+def _memories(run: RunState, of) -> dict[str, Any] | None:
+    """Each recurrent team's memories, ``of(team)`` (``None`` without recurrent actors)."""
+    teams = [t for t in (run.pursuers, run.evader) if t is not None and t.model.recurrent]
+    return {team.name: np.array(of(team)) for team in teams} or None
 
 
 def state_at_last_update(run: RunState) -> dict[str, Any]:
@@ -62,4 +77,5 @@ def state_at_last_update(run: RunState) -> dict[str, Any]:
     state = capture(run)
     if run.boundary.phase == ROLLOUT:
         state["env"], state["rng"], state["pool"] = run.boundary.start
+        state["memory"] = _memories(run, lambda team: team.batch["memory"])
     return state

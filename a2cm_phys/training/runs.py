@@ -135,5 +135,8 @@ def load_trained_evader(path: str | Path) -> tuple[Scenario, ActorCritic]:
 
 
 def model_policy(model: ActorCritic, greedy: bool = False) -> Policy:
-    """The actors of ``model`` as a rollout policy (sampled, or the most probable action)."""
+    """The actors of ``model`` as a rollout policy (sampled, or the most probable action);
+    recurrent actors' keeps their memory between calls (give each rollout its own)."""
+    if getattr(model, "recurrent", False):  # a table policy (solve.tables) has no memory
+        return model.rollout_policy(greedy)
     return lambda obs, rng: model.act(obs, rng, greedy=greedy)

@@ -18,18 +18,32 @@ from ..algos import ActorCritic, Learner, make_model
 from ..algos.shaping import ProgressShaping
 from ..config import Scenario, Train
 from ..envs.sensing import team_dim
-from .rollout import allocate_batch, allocate_evader_batch
+from .rollout import Policy, allocate_batch, allocate_evader_batch
 from .seeding import evader_weights_generator
 
 
 @dataclass
 class Team:
-    """One learning side: its name, model, learner and rollout buffer."""
+    """One learning side: its name, model, learner, rollout buffer and the policy its
+    rollouts act through (with recurrent actors, a policy with memory: the batch's
+    ``memory`` keeps its memories at each rollout's start)."""
 
     name: str
     model: ActorCritic
     learner: Learner
     batch: dict[str, np.ndarray]
+    policy: Policy = dataclasses.field(init=False)
+
+    def __post_init__(self) -> None:
+        self.policy = self.model.rollout_policy()
+        if self.model.recurrent:
+            games = len(self.batch["rewards"][0])
+            self.batch["memory"] = np.zeros(self.model.memory_shape(games), dtype=np.float32)
+
+    def start_rollout(self) -> None:
+        """Note in the batch the memories the rollout starts from (recurrent actors)."""
+        if self.model.recurrent:
+            self.batch["memory"][:] = self.policy.start(len(self.batch["memory"]))
 
 
 def evader_train_cfg(cfg: Train) -> Train:

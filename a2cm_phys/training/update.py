@@ -17,13 +17,16 @@ EvaderPlayer = tuple[Policy, dict[str, np.ndarray]]
 
 def players(run: RunState, pairing: Pairing) -> tuple[Policy, EvaderPlayer | None]:
     """The pursuers' policy and the learned evader's, if any, for a rollout: the live
-    models, or a past snapshot from the pool for the side ``pairing`` says."""
+    models, or a past snapshot from the pool for the side ``pairing`` says. Each side's
+    batch notes the memories its rollout starts from (recurrent actors)."""
     pool = run.pool
-    pursuers = run.model if pool is None else pool.player("pursuers", pairing)
+    run.pursuers.start_rollout()
+    pursuers = run.pursuers.policy if pool is None else pool.player("pursuers", pairing).act
     if run.evader is None:
-        return pursuers.act, None
-    evader = run.evader.model if pool is None else pool.player("evader", pairing)
-    return pursuers.act, (evader.act, run.evader.batch)
+        return pursuers, None
+    run.evader.start_rollout()
+    evader = run.evader.policy if pool is None else pool.player("evader", pairing).act
+    return pursuers, (evader, run.evader.batch)
 
 
 def learn(run: RunState, pairing: Pairing, metrics: dict[str, float]) -> None:

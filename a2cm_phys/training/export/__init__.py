@@ -96,6 +96,11 @@ def export_run(run: str | Path, out: str | Path, check: int = 1000, seed: int = 
             f" {scenario.sensing.radius:g}) cannot be exported yet; only full-observation"
             " runs can"
         )
+    if trained.pursuers.recurrent:  # an actor's memory would be an input and an output
+        raise ConfigError(
+            f"{run}: a run with recurrent actors (recurrent = '{cfg['recurrent']}') cannot be"
+            " exported yet; only memoryless actors can"
+        )
     run = Path(run)
     folder = run if run.is_dir() else run.parent
     out = Path(out)
