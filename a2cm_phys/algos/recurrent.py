@@ -180,12 +180,11 @@ class RecurrentPolicy:
         """One action per agent of each game ``(B, N, ...)``; moves the memories on."""
         model = self.model
         obs = np.asarray(obs, dtype=np.float32)
-        if self.memory is None or len(self.memory) != len(obs):
-            self.memory = np.zeros(model.memory_shape(len(obs)), dtype=np.float32)
+        memory = self.start(len(obs))
         device = next(model.parameters()).device
         with torch.no_grad():
             h = model.remember(
-                torch.as_tensor(obs, device=device), torch.as_tensor(self.memory, device=device)
+                torch.as_tensor(obs, device=device), torch.as_tensor(memory, device=device)
             )
             out = model.actor_out(h).cpu().numpy()
         self.memory = h.cpu().numpy()
