@@ -154,10 +154,12 @@ def test_without_a_terminal_the_lines_carry_the_figures(monkeypatch) -> None:
 
 
 def _train(tmp_path: Path, *extra: str) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "A2CM_PROGRESS_SECONDS": "0.2", "PYTHONPATH": str(ROOT)}
+    # 150 updates take ~1.5 s here and 0.2 s on a fast machine: lines every 0.05 s keep
+    # several periodic lines on both (the grace is the interval, so the start line too)
+    env = {**os.environ, "A2CM_PROGRESS_SECONDS": "0.05", "PYTHONPATH": str(ROOT)}
     env.pop("A2CM_PROGRESS", None)
     cmd = [sys.executable, "-m", "a2cm_phys.train", "--scenario", "grid_collision"]
-    cmd += ["--num-envs", "4", "--updates", "40", "--no-record", "--logdir", str(tmp_path)]
+    cmd += ["--num-envs", "4", "--updates", "150", "--no-record", "--logdir", str(tmp_path)]
     return subprocess.run(
         [*cmd, *extra], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300
     )
@@ -167,8 +169,8 @@ def test_train_without_a_terminal_prints_progress_lines(tmp_path: Path) -> None:
     proc = _train(tmp_path)
     assert proc.returncode == 0, proc.stderr
     lines = [line for line in proc.stderr.splitlines() if line.startswith("train: ")]
-    assert lines[0] == "train: started (40 updates)", proc.stderr
-    periodic = [line for line in lines[1:-1] if re.match(r"train: \d+/40 updates", line)]
+    assert lines[0] == "train: started (150 updates)", proc.stderr
+    periodic = [line for line in lines[1:-1] if re.match(r"train: \d+/150 updates", line)]
     assert periodic, proc.stderr  # at least one line between the start and the end
     figures = (
         r"episodes [\d,]+, mean steps [\d.]+ \(last 100\), collisions/episode [\d.]+,"
@@ -176,10 +178,10 @@ def test_train_without_a_terminal_prints_progress_lines(tmp_path: Path) -> None:
     )
     for line in periodic:
         assert re.fullmatch(
-            rf"train: \d+/40 updates \(\d+%\), [\d.,]+ updates/s, .+ elapsed, ~.+ left, {figures}",
+            rf"train: \d+/150 updates \(\d+%\), [\d.,]+ updates/s, .+ elapsed, ~.+ left, {figures}",
             line,
         ), line
-    assert re.fullmatch(rf"train: done, 40/40 updates \(100%\), .+, {figures}", lines[-1])
+    assert re.fullmatch(rf"train: done, 150/150 updates \(100%\), .+, {figures}", lines[-1])
     assert "train:" not in proc.stdout  # progress on stderr only
 
 
