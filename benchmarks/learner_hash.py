@@ -5,9 +5,10 @@
 Trains six short runs (grid and physics, A2C and A2CM, continuous control, self-play; seed
 3, no log) and hashes every weight of every team and the optimiser's state. The entropy is
 pinned to the values the defaults had before the entropy schedule (1e-4 constant; 0.03 in
-self-play), the continuous run's cell-area shaping and gradient clipping to off (as
-before they existed) and its initial log-std to −0.5 (its default until 2026-12-02), so
-checkouts from before and after them compare. Equal hashes: the same floats.
+self-play), the games, batch and step size to 16, 128 and 7e-3 (the defaults everywhere
+until issue 35's wider grid batches), the continuous run's cell-area shaping and gradient
+clipping to off (as before they existed) and its initial log-std to −0.5 (its default
+until 2026-12-02), so checkouts from before and after them compare. Equal hashes: the same floats.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ RUNS = (
 def options(name: str, updates: int, algo: str) -> dict:
     """The run's training options, the entropy pinned (and its schedule, where it exists)."""
     out = {"updates": updates, "seed": 3, "algo": algo}
+    out.update(num_envs=16, batch_size=128, lr=7e-3)
     out["entropy_coef"] = 0.03 if name == "grid_vs" else 1e-4
     fields = {f.name for f in dataclasses.fields(Train)}
     if "entropy_schedule" in fields:

@@ -98,7 +98,7 @@ def test_training_options_are_validated():
         load_train({"batch_size": 100, "num_envs": 16})
     with pytest.raises(ConfigError, match="'lr'"):
         load_train({"lr": -1.0})
-    assert load_train().lr == 7e-3
+    assert load_train().lr is None  # resolved by the game: the paper's 7e-3, or 1e-2
 
 
 def test_cli_config_error_is_one_line_without_traceback():
@@ -155,8 +155,14 @@ def test_updates_are_resolved_by_the_control_type_and_an_explicit_value_wins() -
 
     unset = load_train()
     assert unset.updates is None
-    for name in ("grid", "grid_collision", "phys", "grid_vs"):
+    for name in ("phys", "grid_vs"):
         assert resolve_train(load_scenario(name), unset).updates == preset("paper")["updates"]
+    for name in ("grid", "grid_collision", "grid_flee"):  # the paper's 640,000 steps, in 512s
+        resolved = resolve_train(load_scenario(name), unset)
+        assert resolved.updates * resolved.batch_size == 640_000 and resolved.updates == 1250
+        # the paper's batch alone gives the paper's 5,000 updates
+        paper_batch = resolve_train(load_scenario(name), load_train({"batch_size": 128}))
+        assert paper_batch.updates == preset("paper")["updates"]
     for name, steps in (("phys_cont", 2e6), ("phys_cont_flee", 4e6), ("phys_cont_vs", 2e6)):
         resolved = resolve_train(load_scenario(name), unset)
         assert 0 <= steps - resolved.updates * resolved.batch_size < resolved.batch_size
@@ -167,11 +173,22 @@ def test_updates_are_resolved_by_the_control_type_and_an_explicit_value_wins() -
 
 
 def test_batch_size_is_resolved_by_the_control_type_and_checked_against_num_envs() -> None:
-    from a2cm_phys.config import resolve_train
+    from a2cm_phys.config import preset, resolve_train
 
     assert load_train().batch_size is None
-    for name in ("grid", "phys", "phys_cont", "phys_cont_collision", "phys_cont_vs"):
-        assert resolve_train(load_scenario(name), load_train()).batch_size == 128, name
+    for name in ("phys", "phys_cont", "phys_cont_collision", "phys_cont_vs", "grid_vs"):
+        resolved = resolve_train(load_scenario(name), load_train())
+        assert (resolved.batch_size, resolved.num_envs, resolved.lr) == (128, 16, 7e-3), name
+    for name in ("grid", "grid_collision", "grid_flee", "grid_pomdp"):  # GRID_DEFAULTS
+        resolved = resolve_train(load_scenario(name), load_train())
+        assert (resolved.batch_size, resolved.num_envs, resolved.lr) == (512, 64, 1e-2), name
+        assert resolved.steps_per_env == 8  # as before: 16 games of 128
+    # the paper's preset is the paper's anywhere
+    paper = resolve_train(load_scenario("grid_collision"), load_train(preset("paper")))
+    assert (paper.num_envs, paper.batch_size, paper.updates, paper.lr) == (1, 128, 5000, 7e-3)
+    # an explicit batch that the default number of games does not divide: named, with the fix
+    with pytest.raises(ConfigError, match=r"'batch_size': 96 .*num_envs=64.*set num_envs"):
+        resolve_train(load_scenario("grid"), load_train({"batch_size": 96}))
     resolved = resolve_train(load_scenario("phys_cont_flee"), load_train())
     assert (resolved.batch_size, resolved.steps_per_env, resolved.updates) == (512, 32, 7812)
     # an explicit batch wins, and continuous control's updates keep its step budget

@@ -265,10 +265,14 @@ def test_runs_written_before_the_options_read_as_without_them():
     old["entropy_coef"] = 1e-4  # every stored run has its value
     old["updates"] = 5000  # likewise
     old["batch_size"] = 128  # likewise
+    old["num_envs"], old["lr"] = 16, 7e-3  # plain defaults then, stored as such
     filled = stored_train(old)
     assert filled["distance_shaping"] == 0.0 and filled["mean_bound_coef"] == 0.0
     assert filled["area_shaping"] == 0.0
     assert filled["pool_every"] == Train().pool_every
     assert filled["entropy_schedule"] == "constant"  # every run before it had a constant one
-    before = Train(entropy_coef=1e-4, entropy_schedule="constant")
+    before = Train(
+        entropy_coef=1e-4, entropy_schedule="constant", num_envs=16, batch_size=128, lr=7e-3,
+        updates=5000,
+    )  # fmt: skip
     assert load_train(filled, "old run") == resolve_train(load_scenario("grid"), before)

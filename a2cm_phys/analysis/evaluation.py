@@ -126,10 +126,10 @@ def optimum(scenario: Scenario, progress: bool = False) -> dict[str, float] | No
     if scenario.mode != "grid" or scenario.evader == "learned":
         return None
     from ..solve import TooLargeError, UnsupportedError
-    from ..solve.cache import load_or_solve
+    from ..solve.cache import load_or_solve_optimum
 
     try:
-        sol = load_or_solve(scenario, progress=progress)
+        sol = load_or_solve_optimum(scenario, progress=progress)
     except (TooLargeError, UnsupportedError):
         return None
     start = sol.start_positions()

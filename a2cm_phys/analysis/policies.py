@@ -50,7 +50,8 @@ import numpy as np
 from ..config import ConfigError, Physics, Scenario, build, load_scenario
 from ..deploy import Team, load_team
 from ..envs.core import ACTION_DELTAS
-from ..solve.cache import OracleSolution, load_or_solve
+from ..solve.cache import OracleSolution, load_or_solve_optimum
+from ..solve.symmetric import SymmetricResult
 from ..training.rollout import Policy
 from .baselines import pursuit_actions
 from .names import (
@@ -107,19 +108,21 @@ class OraclePolicy:
     """The optimal joint policy of a grid scenario, acting on global observations.
 
     ``scenario`` is a :class:`Scenario` or a scenario name/path; the solution is loaded from
-    the cache or solved on construction (see :func:`load_or_solve`; ``progress``: report
-    a solve on stderr).
+    the cache or solved on construction (see :func:`load_or_solve_optimum`: the symmetric
+    solver's on arenas too large for the dense one; ``progress``: report a solve on stderr).
     """
 
     def __init__(
         self,
         scenario: Scenario | str | Path,
         cache_dir: str | Path | None = None,
-        solution: OracleSolution | None = None,
+        solution: OracleSolution | SymmetricResult | None = None,
         progress: bool = False,
     ) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-        self.solution = solution or load_or_solve(self.scenario, cache_dir, progress=progress)
+        self.solution = solution or load_or_solve_optimum(
+            self.scenario, cache_dir, progress=progress
+        )
 
     def positions(self, obs: np.ndarray) -> np.ndarray:
         """Integer cells ``(B, N + 1, 2)`` decoded from observations ``(B, obs_dim)`` (with

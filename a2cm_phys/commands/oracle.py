@@ -46,10 +46,10 @@ from .options import (
     split_assignments,
     writable_dir,
 )
+from .oracle_report import optimum_report
 
 if TYPE_CHECKING:  # the solvers (numpy arrays, torch) are imported after parsing
     from ..solve.best_response import BestResponse, Outcome
-    from ..solve.cache import OracleSolution
     from ..solve.minimax import MinimaxBounds
     from ..solve.nash import GameValue
 
@@ -58,53 +58,6 @@ TOLERANCE = 1e-9
 equal; the solvers are not imported for ``--help``)."""
 
 # --------------------------------------------------------------------------- command
-
-
-def _report(sol: OracleSolution) -> str:
-    import numpy as np
-
-    sc, meta = sol.scenario, sol.meta
-    start = sol.start_positions()
-    dist = sol.distribution()
-    cells = " ".join(f"({x},{y})" for x, y in start[:-1])
-    state = "loaded from" if sol.cached else ("saved to" if sol.path else "not cached")
-    peak = meta.get("peak_bytes")
-    lines = [
-        f"oracle: {sc.name}: {sc.size}x{sc.size} grid, {sc.pursuers} pursuer(s), "
-        f"{sc.actions} actions, {sc.evader} evader, collisions {sc.collisions.mode}",
-        f"  solve: {meta['states']:,} joint states x {meta['joint_actions']} joint actions, "
-        f"{meta['sweeps']} sweeps (+{meta['qualitative_sweeps']} reachability), residual "
-        f"{meta['residual']:.1e}, {meta['seconds']:.1f} s"
-        + (f", peak {peak / 2**20:.0f} MiB" if peak else ""),
-        f"  check: greedy policy replayed through GridRules.apply matches the optimum to "
-        f"{meta['policy_check']:.1e}",
-        f"  cache: {state} {sol.path}" if sol.path else f"  cache: {state}",
-    ]
-    if meta["losing_states"]:
-        lines.append(f"  {meta['losing_states']:,} states from which capture cannot be forced")
-    lines += [
-        f"  start: pursuers {cells}, evader ({start[-1][0]},{start[-1][1]})",
-        f"  optimal expected return: {sol.optimal_return(start):.6f}",
-        f"  expected steps to capture: {sol.expected_capture_steps(start):.6f}",
-    ]
-    if not np.isfinite(sol.optimal_return(start)):
-        lines.append("  capture cannot be forced from the start: no finite optimum")
-        return "\n".join(lines)
-    if sc.collisions.mode != "off":
-        lines.append(
-            f"  P(capture) {dist.p_capture:.6f}, P(ended by collision) "
-            f"{dist.collision.sum():.2e}, expected collisions "
-            f"{float(sol.collisions[sol.index(start)]):.2e}"
-        )
-    median, p95 = dist.quantile(0.5), dist.quantile(0.95)
-    lines.append(
-        f"  capture steps: mean {dist.mean_length():.6f}, median {median:g}, p95 {p95:g}, "
-        f"p99 {dist.quantile(0.99):g}, P(truncated at {sc.max_steps}) {dist.truncated:.1e}"
-    )
-    top = int(min(dist.quantile(0.999), 20)) if np.isfinite(dist.quantile(0.999)) else 20
-    cdf = ", ".join(f"{k}: {dist.cdf(k):.4f}" for k in range(1, top + 1))
-    lines.append(f"  P(capture <= k): {cdf}")
-    return "\n".join(lines)
 
 
 def _outcome_lines(out: Outcome, start: int, horizon: int, terminate: bool) -> list[str]:
@@ -375,15 +328,15 @@ def _main(argv: Sequence[str]) -> int:
         return _game_value(args)
     if args.best_response:
         return _best_response(args)
-    from ..solve.cache import load_or_solve
+    from ..solve.cache import load_or_solve_optimum
 
     args.scenario = args.scenario or "grid"
     scenario = scenario_from_args(args, train=False)
     with _solver_errors():
-        sol = load_or_solve(
+        sol = load_or_solve_optimum(
             scenario, args.cache_dir, not args.no_cache, progress=not args.no_progress
         )
-    print(_report(sol))
+    print(optimum_report(sol))
     return 0
 
 

@@ -16,7 +16,9 @@ CONTROL_DEFAULTS: dict[str, dict[str, float]] = {
         "distance_shaping": 1.0,
         "area_shaping": 2.0,
         "max_grad_norm": 0.5,
+        "num_envs": 16,
         "batch_size": 128,
+        "lr": 7e-3,
         "steps": 2_000_000,  # the budget: updates = steps // batch_size
     },
     "discrete": {
@@ -25,7 +27,9 @@ CONTROL_DEFAULTS: dict[str, dict[str, float]] = {
         "distance_shaping": 0.0,
         "area_shaping": 0.0,
         "max_grad_norm": 0.0,
+        "num_envs": 16,
         "batch_size": 128,
+        "lr": 7e-3,
         "updates": 5000,
     },
 }
@@ -72,6 +76,25 @@ FLEE_DEFAULTS: dict[str, int] = {"batch_size": 512, "steps": 4_000_000}
   every seed of both at 0.77–0.79× (5 seeds each; with 8-step rollouts and 2,000,000
   steps 0.84× and 0.92×). ``BENCHMARKS.md``, "Rollouts of 32 steps against the fleeing
   evader"."""
+
+
+GRID_DEFAULTS: dict[str, float] = {
+    "num_envs": 64,
+    "batch_size": 512,
+    "lr": 1e-2,
+    "steps": 640_000,
+}
+"""What grid games against a scripted evader change of :data:`CONTROL_DEFAULTS`: 64 games
+and batches of 512 (8 steps in each game, as before), at a step size of 1e-2, for the
+paper's 640,000 steps (1,250 updates; the paper's 5,000 of 128 with ``--batch-size 128``).
+
+The learner's cost is mostly per update, not per step, so a quarter of the updates halves
+the main job's training time; the rollout's per-step cost is shared by four times the
+games. Measured on ``grid_collision`` (greedy over 5,000 episodes, 5 seeds, A2CM;
+``BENCHMARKS.md``, "The main job in half the time"): 16 games of 128 at 7e-3 (before)
+2.943 steps on seed 0; 64 of 512 at 7e-3 a median of 2.961 (worst 2.993), at 1e-2 2.949
+(worst 2.959), 128 of 1,024 2.964 (one seed collided); no collision in any other run. A
+learned evader (self-play) and physics keep 16 games of 128."""
 
 
 ENTROPY: dict[str, tuple[float, Schedule]] = {
@@ -126,11 +149,11 @@ def resolve_train(scenario: Scenario, cfg: Train) -> Train:
     """A run's training settings, resolved: ``cfg`` with its unset (None) keys given the
     values of ``scenario``'s control type (:data:`CONTROL_DEFAULTS`, the shaping weights
     times :func:`step_cost`, continuous control's updates from its step budget) and game
-    (:data:`ENTROPY`, :data:`FLEE_DEFAULTS`), then checked against the scenario
-    (:func:`check_train`). Called once, where options enter (the train command, a sweep's
-    runs, the report's plan): what it returns is what ``config.json`` records and the
-    trainer and learner take, and nothing after it resolves or checks again. A default
-    batch that ``cfg.num_envs`` does not divide is a :class:`ConfigError` naming
+    (:data:`ENTROPY`, :data:`FLEE_DEFAULTS`, :data:`GRID_DEFAULTS`), then checked against the
+    scenario (:func:`check_train`). Called once, where options enter (the train command, a
+    sweep's runs, the report's plan): what it returns is what ``config.json`` records and
+    the trainer and learner take, and nothing after it resolves or checks again. A batch
+    that the number of games does not divide is a :class:`ConfigError` naming
     ``batch_size``."""
     values = dict(CONTROL_DEFAULTS["continuous" if scenario.continuous else "discrete"])
     values["entropy_coef"], values["entropy_schedule"] = ENTROPY[entropy_game(scenario)]
@@ -139,14 +162,18 @@ def resolve_train(scenario: Scenario, cfg: Train) -> Train:
         values[key] *= cost
     if scenario.continuous and scenario.evader == "flee":
         values.update(FLEE_DEFAULTS)
+    if scenario.mode == "grid" and scenario.evader != "learned":
+        values.update(GRID_DEFAULTS)
+        values.pop("updates")
     batch = values["batch_size"] if cfg.batch_size is None else cfg.batch_size
     if "steps" in values:
         values["updates"] = values.pop("steps") // batch
     unset = {k: v for k, v in values.items() if getattr(cfg, k) is None}
-    if "batch_size" in unset and unset["batch_size"] % cfg.num_envs:
+    games = values["num_envs"] if cfg.num_envs is None else cfg.num_envs
+    if "batch_size" in unset and unset["batch_size"] % games:
         raise ConfigError(
             f"training options: key 'batch_size': this scenario's default of"
-            f" {unset['batch_size']} is not a multiple of num_envs={cfg.num_envs}; set"
+            f" {unset['batch_size']} is not a multiple of num_envs={games}; set"
             " batch_size too"
         )
     resolved = dataclasses.replace(cfg, **unset) if unset else cfg
@@ -161,6 +188,12 @@ def check_train(scenario: Scenario, cfg: Train) -> None:
     :mod:`a2cm_phys.training.descent` asks it when descent is set up.)"""
     if cfg.seed < 0:  # seeds feed numpy generators
         raise ConfigError(f"training options: key 'seed': must be >= 0, got {cfg.seed}")
+    if cfg.batch_size % cfg.num_envs:  # one of them is this scenario's default
+        raise ConfigError(
+            f"training options: key 'batch_size': {cfg.batch_size} is not a multiple of"
+            f" num_envs={cfg.num_envs} (this scenario's default when unset); set num_envs"
+            " too"
+        )
     if scenario.mode == "physics" and cfg.workers > cfg.num_envs:
         raise ConfigError(
             f"training options: key 'workers': {cfg.workers} processes for num_envs="

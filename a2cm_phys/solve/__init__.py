@@ -5,8 +5,12 @@
 actions with numpy (:mod:`.backup`); :mod:`.dp` runs value iteration on it (and, for
 evaders that might escape, finds the states from which capture cannot be forced);
 :mod:`.policy_chain` replays a fixed policy through the real rule
-(:meth:`~a2cm_phys.envs.grid.GridRules.apply`) to evaluate it exactly. The solutions'
-cache is :mod:`.cache`; the command, :mod:`a2cm_phys.commands.oracle`.
+(:meth:`~a2cm_phys.envs.grid.GridRules.apply`) to evaluate it exactly. Arenas too large
+for that (7x7 and up, 3 pursuers) are solved against the random or static evader over one
+state per orbit of the game's symmetries (:mod:`.symmetry`; :mod:`.symmetric` over
+:mod:`.symmetric_sweep`). The solutions' cache is :mod:`.cache`
+(:func:`~.cache.load_or_solve_optimum` picks the solver); the command,
+:mod:`a2cm_phys.commands.oracle`.
 
 Exploitability: :mod:`.tables` defines the policy tables over joint states both teams'
 fixed policies are given as; :mod:`.best_response` solves the evader's best response to a

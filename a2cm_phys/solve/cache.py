@@ -23,7 +23,9 @@ from ..config import Scenario
 from ..envs.core import default_start
 from . import GridModel, capture_distribution, evaluate_policy, policy_chain, solve_dp
 from .policy_chain import CaptureDistribution, PolicyChain
+from .symmetric import EVADERS, SymmetricResult, solve_symmetric
 from .tables import state_index
+from .transitions import TooLargeError
 
 if TYPE_CHECKING:  # the solver imports torch: only when the game's value is asked for
     from .nash import GameValue
@@ -219,6 +221,39 @@ def load_or_solve(
             sol.path = None
     else:
         sol.path = None
+    return sol
+
+
+def load_or_solve_optimum(
+    scenario: Scenario,
+    cache_dir: str | Path | None = None,
+    use_cache: bool = True,
+    progress: bool = False,
+) -> OracleSolution | SymmetricResult:
+    """The optimum of ``scenario``: :func:`load_or_solve`'s where the dense solver holds
+    the arena, else (random and static evaders) the symmetric solver's
+    (:mod:`.symmetric`, up to 13x13 with 3 pursuers), cached as ``<key>-symmetric.npz``.
+    Both answer ``actions``, ``expected_capture_steps``, ``optimal_return``,
+    ``start_positions`` and ``distribution``. Raises what the solvers raise: the symmetric
+    solver's limit where it is tried, else the dense one's."""
+    try:
+        return load_or_solve(scenario, cache_dir, use_cache, progress)
+    except TooLargeError:
+        if scenario.evader not in EVADERS:
+            raise
+    path = Path(cache_dir or default_cache_dir()) / f"{cache_key(scenario)}-symmetric.npz"
+    if use_cache and path.is_file():
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                return SymmetricResult.from_arrays(scenario, data)
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+            pass  # unreadable or stale: solve again and overwrite it
+    sol = solve_symmetric(scenario, progress=progress)
+    if use_cache:
+        try:
+            _write_npz(path, **sol.to_arrays())
+        except OSError as err:
+            print(f"oracle: warning: cannot write cache {path}: {err.strerror}", file=sys.stderr)
     return sol
 
 
