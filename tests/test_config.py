@@ -155,9 +155,9 @@ def test_updates_are_resolved_by_the_control_type_and_an_explicit_value_wins() -
 
     unset = load_train()
     assert unset.updates is None
-    for name in ("phys", "grid_vs"):
+    for name in ("phys", "grid_vs", "grid_flee"):
         assert resolve_train(load_scenario(name), unset).updates == preset("paper")["updates"]
-    for name in ("grid", "grid_collision", "grid_flee"):  # the paper's 640,000 steps, in 512s
+    for name in ("grid", "grid_collision"):  # the paper's 640,000 steps, in batches of 512
         resolved = resolve_train(load_scenario(name), unset)
         assert resolved.updates * resolved.batch_size == 640_000 and resolved.updates == 1250
         # the paper's batch alone gives the paper's 5,000 updates
@@ -176,10 +176,17 @@ def test_batch_size_is_resolved_by_the_control_type_and_checked_against_num_envs
     from a2cm_phys.config import preset, resolve_train
 
     assert load_train().batch_size is None
-    for name in ("phys", "phys_cont", "phys_cont_collision", "phys_cont_vs", "grid_vs"):
+    for name in (
+        "phys",
+        "phys_cont",
+        "phys_cont_collision",
+        "phys_cont_vs",
+        "grid_vs",
+        "grid_flee",
+    ):
         resolved = resolve_train(load_scenario(name), load_train())
         assert (resolved.batch_size, resolved.num_envs, resolved.lr) == (128, 16, 7e-3), name
-    for name in ("grid", "grid_collision", "grid_flee", "grid_pomdp"):  # GRID_DEFAULTS
+    for name in ("grid", "grid_collision", "grid_pomdp", "grid10"):  # GRID_DEFAULTS
         resolved = resolve_train(load_scenario(name), load_train())
         assert (resolved.batch_size, resolved.num_envs, resolved.lr) == (512, 64, 1e-2), name
         assert resolved.steps_per_env == 8  # as before: 16 games of 128

@@ -96,27 +96,27 @@ def _add_train_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--num-envs",
         type=_COUNT,
-        help="parallel games (default: 16; grid against a scripted evader: 64; --preset"
+        help="parallel games (default: 16; grid against the random evader: 64; --preset"
         " paper: 1, the paper's setting)",
     )
     p.add_argument(
         "--updates",
         type=_COUNT,
-        help="gradient updates (default: 5000; grid against a scripted evader: 640,000"
+        help="gradient updates (default: 5000; grid against the random evader: 640,000"
         " steps' worth; continuous control: 2,000,000 steps' worth, 4,000,000 against the"
         " fleeing evader)",
     )
     p.add_argument(
         "--batch-size",
         type=_COUNT,
-        help="steps per update over all games (default: 128; grid against a scripted"
+        help="steps per update over all games (default: 128; grid against the random"
         " evader, and continuous control against the fleeing evader: 512)",
     )
     p.add_argument("--seed", type=SEED, help=f"the run's seed (default: {d.seed})")
     p.add_argument(
         "--lr",
         type=float,
-        help="learning rate (default: 0.007, the paper's; grid against a scripted evader: 0.01)",
+        help="learning rate (default: 0.007, the paper's; grid against the random evader: 0.01)",
     )
     p.add_argument(
         "--reward-scale",
