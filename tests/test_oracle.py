@@ -305,9 +305,11 @@ def test_cli_reports_and_caches(tmp_path, capsys) -> None:
 
 
 def test_too_large_is_one_line_and_exit_2(capsys) -> None:
-    assert main(["--set", "pursuers=4", "--no-cache"]) == 2
+    # beyond the dense solver (7x7 and up) the symmetric one answers, up to its own limit
+    assert main(["--set", "size=14", "--no-cache"]) == 2
     err = capsys.readouterr().err.strip()
-    assert "\n" not in err and "too large" in err and "9,765,625 joint states" in err
+    assert "\n" not in err and "too large" in err and "1,475,789,056 joint states" in err
+    assert "8.0 GiB" in err  # the limit it names
     with pytest.raises(TooLargeError, match="GiB"):
         GridModel(grid(size=3, pursuers=2), memory_budget=1000)
 

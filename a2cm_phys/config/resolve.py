@@ -94,7 +94,8 @@ games. Measured on ``grid_collision`` (greedy over 5,000 episodes, 5 seeds, A2CM
 ``BENCHMARKS.md``, "The main job in half the time"): 16 games of 128 at 7e-3 (before)
 2.943 steps on seed 0; 64 of 512 at 7e-3 a median of 2.961 (worst 2.993), at 1e-2 2.949
 (worst 2.959), 128 of 1,024 2.964 (one seed collided); no collision in any other run. With
-these, A2C came to 2.956 (worst 3.261; 2.929 before) and ``grid`` to 2.948. Against the
+these, A2C came to 2.956 (worst 3.261; 2.929 before), ``grid_collision_continue`` to 2.957
+(2.931; one seed collided once in ~1,700 episodes) and ``grid`` to 2.935 (2.929). Against the
 fleeing evader they were far worse (``grid_flee``: A2CM 11.9 steps, A2C 8.0, against 6.1
 and 5.5 with 16 of 128), so it keeps 16 games of 128, as do a learned evader (self-play)
 and physics."""
