@@ -31,8 +31,8 @@ from ..envs.render import (
     render_rgb,
     step_contacts,
 )
-from ..record.masks import in_range, trajectory_masks
-from ..record.runlog import Trajectory
+from ..record.masks import in_range
+from ..record.runlog import Trajectory, trajectory_masks
 
 GRID_FRAME_SECONDS = 0.5
 """Seconds a grid frame shows: two moves a second, a pace a person can follow."""

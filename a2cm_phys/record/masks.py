@@ -7,21 +7,18 @@ agent's row into one integer whose bit ``j`` (value ``2**j``) is set when the ag
 body ``j`` (its own bit always is): ``N + 1`` small integers per state row (0 … 15 with 3
 pursuers), exact in any JSON reader up to 52 pursuers. Logs without sensing, and logs
 written before the masks were logged, have no such field; their masks can still be
-recomputed from the positions (:func:`trajectory_masks`), since they depend on nothing else.
+recomputed from the positions (:func:`masks_of`; a trajectory's, logged or recomputed:
+:func:`.runlog.trajectory_masks`), since they depend on nothing else.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..config import Scenario
 from ..envs.sensing import sensed
-
-if TYPE_CHECKING:  # runlog reads the log's masks with unpacked(): no import back at run time
-    from .runlog import Trajectory
 
 
 def packed(masks: np.ndarray) -> np.ndarray:
@@ -45,25 +42,6 @@ def masks_of(scenario: Scenario, positions: np.ndarray) -> np.ndarray | None:
     if not scenario.sensing.on:
         return None
     return sensed(scenario, np.asarray(positions).reshape(-1, scenario.pursuers + 1, 2))
-
-
-def trajectory_masks(scenario: Scenario, traj: Trajectory) -> np.ndarray | None:
-    """Every state's masks ``(L + 1, N + 1, N + 1)``: the logged ones, else recomputed from
-    the positions (an older log, an episode played for a picture); ``None`` without sensing."""
-    if not scenario.sensing.on:
-        return None
-    if traj.sensed is not None:
-        return traj.sensed
-    return masks_of(scenario, traj.positions)
-
-
-def state_masks(scenario: Scenario, traj: Trajectory, k: int) -> np.ndarray | None:
-    """State ``k``'s masks ``(N + 1, N + 1)`` (as :func:`trajectory_masks`, for one state)."""
-    if not scenario.sensing.on:
-        return None
-    if traj.sensed is not None:
-        return traj.sensed[k]
-    return masks_of(scenario, traj.positions[k : k + 1])[0]
 
 
 def in_range(scenario: Scenario, positions: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..base.errors import UserError
 from ..config import ConfigError, Scenario, build
-from .masks import unpacked
+from .masks import masks_of, unpacked
 from .schemas import SUMMARY_SCHEMA
 
 
@@ -37,7 +37,7 @@ class Trajectory:
     per step (``None`` with a scripted evader, or in a log older than format 2). ``sensed``
     holds each state's sensing masks (SPEC §6b; ``[k, i, j]``: agent ``i`` knows body ``j``
     in state ``k``), in logs of sensing scenarios written since the masks were logged
-    (``None`` otherwise; :func:`.masks.trajectory_masks` recomputes them)."""
+    (``None`` otherwise; :func:`trajectory_masks` recomputes them)."""
 
     episode: int
     env: int
@@ -194,3 +194,22 @@ class RunLog:
             for traj in Trajectory.from_block(json.loads(data)):
                 if self._where.get(traj.episode) == block:
                     yield traj
+
+
+def trajectory_masks(scenario: Scenario, traj: Trajectory) -> np.ndarray | None:
+    """Every state's masks ``(L + 1, N + 1, N + 1)``: the logged ones, else recomputed from
+    the positions (an older log, an episode played for a picture); ``None`` without sensing."""
+    if not scenario.sensing.on:
+        return None
+    if traj.sensed is not None:
+        return traj.sensed
+    return masks_of(scenario, traj.positions)
+
+
+def state_masks(scenario: Scenario, traj: Trajectory, k: int) -> np.ndarray | None:
+    """State ``k``'s masks ``(N + 1, N + 1)`` (as :func:`trajectory_masks`, for one state)."""
+    if not scenario.sensing.on:
+        return None
+    if traj.sensed is not None:
+        return traj.sensed[k]
+    return masks_of(scenario, traj.positions[k : k + 1])[0]

@@ -41,8 +41,8 @@ from foxglove.messages import (
 from ..config import Scenario
 from ..envs.core import agent_names
 from ..envs.render import EVADER_COLOUR, PURSUER_COLOURS, step_contacts
-from .masks import in_range, state_masks
-from .runlog import Trajectory
+from .masks import in_range
+from .runlog import Trajectory, state_masks
 
 FRAME_ID = "arena"
 """The frame every entity is drawn in (set it as the 3D panel's display frame)."""
