@@ -67,15 +67,15 @@ class EpisodeTallies:
         i = np.asarray(envs, dtype=np.int64)
         if not len(i):
             return []
-        captured = np.asarray(out.captured)[i]
+        captured = np.asarray(out.captured, dtype=bool)[i]
         columns = (  # whole columns to Python numbers at once: the same values as int()/float()
             i.tolist(),
             np.asarray(seeds)[i].tolist(),
             np.asarray(lengths)[i].tolist(),
             self.ret[i].tolist(),
             captured.tolist(),
-            np.asarray(out.truncated)[i].tolist(),
-            (np.asarray(out.terminated)[i] & ~captured).tolist(),
+            np.asarray(out.truncated, dtype=bool)[i].tolist(),
+            (np.asarray(out.terminated, dtype=bool)[i] & ~captured).tolist(),
             self.collisions[i].tolist(),
             self.walls[i].tolist(),
             self.evader_ret[i].tolist() if learned_evader else [None] * len(i),
