@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from a2cm_phys.analysis.evaluation import optimum, play
+from a2cm_phys.analysis.evaluation import optimum, play, reference_of
 from a2cm_phys.analysis.policies import OraclePolicy
 from a2cm_phys.commands.oracle import main as oracle_main
 from a2cm_phys.config import load_scenario
@@ -102,3 +102,12 @@ def test_the_optimum_and_the_oracle_policy_use_the_fallback(dense_refuses) -> No
 def test_physics_is_still_refused_with_its_reason() -> None:
     with pytest.raises(UnsupportedError, match="grid mode only"):
         load_or_solve_optimum(load_scenario("phys"))
+
+
+def test_the_default_reference_is_pursuit_where_no_oracle_solves_the_arena() -> None:
+    big = load_scenario("grid", {"pursuers": 6})  # 25^7 joint states: both solvers refuse
+    ref = reference_of(big, episodes=64)
+    assert ref is not None and ref.policy == "pursuit" and ref.played is not None
+    assert ref.unavailable is None and len(ref.played.lengths) == 64
+    asked = reference_of(big, "oracle", episodes=64)  # asked for by name: why not, instead
+    assert asked is not None and asked.played is None and "too large" in asked.unavailable

@@ -200,13 +200,14 @@ def reference_of(
     progress: bool = False,
 ) -> ReferenceResult | None:
     """The reference beside a result in ``scenario``: the pursuer policy ``name``
-    (default: :func:`reference_policy`; ``none``: no reference, ``None``). The oracle's on
-    a grid is its exact optimum; any other is played for ``episodes`` episodes in up to
-    ``num_envs`` games from ``seed``. Where it cannot be had (an arena too large for the
-    oracle; a grid whose evader is learned, which has no single optimum) the result says
-    why in ``unavailable``. ``progress``: count the episodes played (and report a solve)
-    on stderr."""
-    name = name or reference_policy(scenario)
+    (default: :func:`reference_policy`, and ``pursuit`` where the oracle cannot solve the
+    arena; ``none``: no reference, ``None``). The oracle's on a grid is its exact optimum;
+    any other is played for ``episodes`` episodes in up to ``num_envs`` games from
+    ``seed``. Where the policy asked for cannot be had (an arena too large for the oracle;
+    a grid whose evader is learned, which has no single optimum) the result says why in
+    ``unavailable``. ``progress``: count the episodes played (and report a solve) on
+    stderr."""
+    chosen, name = name, name or reference_policy(scenario)
     if name == "none":
         return None
     if name == "oracle" and scenario.mode == "grid":
@@ -218,6 +219,8 @@ def reference_of(
     try:
         policy = pursuer_policy(name, scenario, progress=progress)
     except ConfigError as err:  # e.g. an arena too large for the oracle
+        if chosen is None and name != "pursuit":  # the default: the scripted team instead
+            return reference_of(scenario, "pursuit", episodes, num_envs, seed, progress)
         return ReferenceResult(name, unavailable=str(err))
     with Progress(f"reference ({name})", episodes, "ep", enabled=progress) as bar:
         played = play(scenario, policy, episodes, num_envs, seed, progress=bar)
