@@ -1,8 +1,10 @@
 """The main job's wall time, as a user types it (issue 12: at most 30 s with its log).
 
     python benchmarks/bench_main_job.py [--repeats 5] [--peer /path/to/other/checkout]
+        [--scenario grid_collision]
 
-Runs ``python -m a2cm_phys.train --scenario grid_collision --no-progress`` in a fresh
+Runs ``python -m a2cm_phys.train --scenario grid_collision --no-progress`` (or another
+scenario as typed, e.g. ``--scenario phys_cont``) in a fresh
 temporary folder (interpreter start-up, imports, training, the MCAP log and the summary
 included) ``--repeats`` times and prints the median wall time. With ``--peer`` the same
 command runs from another checkout (``PYTHONPATH``), alternating with this one, and the
@@ -21,15 +23,15 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parents[1]
-COMMAND = [sys.executable, "-m", "a2cm_phys.train", "--scenario", "grid_collision", "--no-progress"]
 
 
-def wall_time(checkout: Path) -> float:
-    """Seconds of one main job run from ``checkout``, in a fresh folder."""
+def wall_time(checkout: Path, scenario: str) -> float:
+    """Seconds of one run of ``scenario`` as typed from ``checkout``, in a fresh folder."""
     env = {**os.environ, "PYTHONPATH": str(checkout)}
+    command = [sys.executable, "-m", "a2cm_phys.train", "--scenario", scenario, "--no-progress"]
     with tempfile.TemporaryDirectory() as folder:
         t0 = time.perf_counter()
-        subprocess.run(COMMAND, cwd=folder, env=env, check=True, stdout=subprocess.DEVNULL)
+        subprocess.run(command, cwd=folder, env=env, check=True, stdout=subprocess.DEVNULL)
         return time.perf_counter() - t0
 
 
@@ -38,12 +40,13 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--peer", type=Path, help="another checkout to time beside this one")
+    p.add_argument("--scenario", default="grid_collision", help="the job: train this scenario")
     args = p.parse_args()
     checkouts = {"this": HERE, **({"peer": args.peer.resolve()} if args.peer else {})}
     times: dict[str, list[float]] = {name: [] for name in checkouts}
     for _ in range(args.repeats):
         for name, checkout in checkouts.items():
-            times[name].append(wall_time(checkout))
+            times[name].append(wall_time(checkout, args.scenario))
     for name, values in times.items():
         each = ", ".join(f"{v:.1f}" for v in values)
         print(f"{name} ({checkouts[name]}): median {statistics.median(values):.2f} s ({each})")

@@ -5,7 +5,8 @@
 
 A variant is a set of training options on top of the scenario's defaults (``VARIANTS``;
 ``defaults`` is the shipped configuration, ``before`` the grid defaults before issue 35:
-16 games, batches of 128, 5,000 updates at 7e-3). Each (variant, seed) trains without an episode
+16 games, batches of 128, 5,000 updates at 7e-3; the ``w`` variants keep the scenario's
+own step budget, for physics). Each (variant, seed) trains without an episode
 log, timed as ``Trainer.run()`` alone, then plays the trained team greedily for
 ``--episodes`` episodes (seed 1000 + seed). Rows go to ``--out`` as JSON lines as they
 come (a rerun skips the ones there). The table gives per variant the median training
@@ -28,6 +29,7 @@ from pathlib import Path
 import torch
 
 from a2cm_phys.analysis.evaluation import play
+from a2cm_phys.analysis.policies import pursuer_policy
 from a2cm_phys.config import load_scenario, load_train, resolve_train
 from a2cm_phys.training.runs import model_policy
 from a2cm_phys.training.trainer import Trainer
@@ -45,6 +47,11 @@ VARIANTS: dict[str, dict] = {
     "e128b1024": {"num_envs": 128, "batch_size": 1024, "updates": STEPS // 1024},
     "e64b512x.75": {"num_envs": 64, "batch_size": 512, "updates": 3 * STEPS // 4 // 512},
     "e64b512x.5": {"num_envs": 64, "batch_size": 512, "updates": STEPS // 2 // 512},
+    # the scenario's own step budget (updates = steps // batch_size): physics's variants
+    "w16b128": {"num_envs": 16, "batch_size": 128},
+    "w32b256": {"num_envs": 32, "batch_size": 256},
+    "w64b512": {"num_envs": 64, "batch_size": 512},
+    "w64b512lr1e-2": {"num_envs": 64, "batch_size": 512, "lr": 1e-2},
 }
 
 
@@ -71,6 +78,16 @@ def run_one(job: dict) -> dict:
         "mean_steps": float(result.lengths.mean()),
         "collisions": float(result.collisions.mean()),
     }
+
+
+def pursuit_steps(scenario: str, seeds: list[int], episodes: int) -> float:
+    """The scripted ``pursuit`` team's median mean capture steps on the episodes the
+    variants are played on (seeds 1000 + seed): the reference of physics's target."""
+    sc = load_scenario(scenario)
+    policy = pursuer_policy("pursuit", sc)
+    return statistics.median(
+        float(play(sc, policy, episodes, 16, 1000 + s).lengths.mean()) for s in seeds
+    )
 
 
 def seeds_of(text: str) -> list[int]:
@@ -116,6 +133,9 @@ def main() -> None:
     p.add_argument("--jobs", type=int, default=1)
     p.add_argument("--out", type=Path, default=Path("benchmarks/results/speed.jsonl"))
     p.add_argument("--table", action="store_true", help="only print the table of --out")
+    p.add_argument(
+        "--pursuit", action="store_true", help="also print the scripted pursuit team's figure"
+    )
     args = p.parse_args()
     done = []
     if args.out.exists():
@@ -146,6 +166,9 @@ def main() -> None:
                     flush=True,
                 )
     table(done, args.scenario, args.algo)
+    if args.pursuit:
+        seeds = seeds_of(args.seeds)
+        print(f"pursuit: {pursuit_steps(args.scenario, seeds, args.episodes):.3f} steps")
 
 
 if __name__ == "__main__":

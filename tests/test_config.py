@@ -176,20 +176,18 @@ def test_batch_size_is_resolved_by_the_control_type_and_checked_against_num_envs
     from a2cm_phys.config import preset, resolve_train
 
     assert load_train().batch_size is None
-    for name in (
-        "phys",
-        "phys_cont",
-        "phys_cont_collision",
-        "phys_cont_vs",
-        "grid_vs",
-        "grid_flee",
-    ):
+    for name in ("phys", "phys_cont_vs", "grid_vs", "grid_flee"):
         resolved = resolve_train(load_scenario(name), load_train())
         assert (resolved.batch_size, resolved.num_envs, resolved.lr) == (128, 16, 7e-3), name
     for name in ("grid", "grid_collision", "grid_pomdp", "grid10"):  # GRID_DEFAULTS
         resolved = resolve_train(load_scenario(name), load_train())
         assert (resolved.batch_size, resolved.num_envs, resolved.lr) == (512, 64, 1e-2), name
         assert resolved.steps_per_env == 8  # as before: 16 games of 128
+        assert resolved.updates == 1250  # the paper's 640,000 steps
+    for name in ("phys_cont", "phys_cont_collision", "phys_cont_pomdp", "phys_cont10"):
+        resolved = resolve_train(load_scenario(name), load_train())  # WIDE_DEFAULTS
+        assert (resolved.batch_size, resolved.num_envs, resolved.lr) == (512, 64, 1e-2), name
+        assert resolved.steps_per_env == 8 and resolved.updates == 2_000_000 // 512
     # the paper's preset is the paper's anywhere
     paper = resolve_train(load_scenario("grid_collision"), load_train(preset("paper")))
     assert (paper.num_envs, paper.batch_size, paper.updates, paper.lr) == (1, 128, 5000, 7e-3)
@@ -204,7 +202,9 @@ def test_batch_size_is_resolved_by_the_control_type_and_checked_against_num_envs
     # 512 is no multiple of 48: the error names the key and the default, before any run
     with pytest.raises(ConfigError, match=r"'batch_size'.*default of 512.*num_envs=48"):
         resolve_train(load_scenario("phys_cont_flee"), load_train({"num_envs": 48}))
-    assert resolve_train(load_scenario("phys_cont"), load_train({"num_envs": 32})).updates == 15_625
+    assert resolve_train(load_scenario("phys_cont"), load_train({"num_envs": 32})).updates == 3906
+    resolved = resolve_train(load_scenario("phys_cont_vs"), load_train({"num_envs": 32}))
+    assert (resolved.batch_size, resolved.updates) == (128, 15_625)
 
 
 def test_paper_preset_has_no_shaping_and_no_clipping_in_continuous_control() -> None:

@@ -176,6 +176,18 @@ def test_round_trip_every_channel(grid_log: tuple[Path, dict]) -> None:
         assert got["env_steps"] == (k + 1) * 8 * expected["envs"] and got["steps_per_s"] > 0
 
 
+def test_episode_ids_run_on_across_writes(tmp_path: Path) -> None:
+    """More steps than the step buffers hold: the queue is written several steps at a time
+    (when the buffers fill, and at the end), and every episode keeps its own id."""
+    expected = make_log(tmp_path / "m.mcap", envs=3, steps=2600, updates_every=0)
+    finished = expected["finished"]
+    log = read_run(tmp_path / "m.mcap")
+    assert log.episodes["episode"].tolist() == list(range(len(finished)))
+    assert log.episodes["length"].tolist() == [e.length for e, _ in finished]
+    assert log.episodes["env"].tolist() == [e.env for e, _ in finished]
+    assert [t.length for t in log.trajectories()] == [e.length for e, _ in finished]
+
+
 def test_metadata_holds_scenario_and_provenance(grid_log: tuple[Path, dict]) -> None:
     path, expected = grid_log
     log = read_run(path)

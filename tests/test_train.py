@@ -206,7 +206,7 @@ def test_every_scenario_trains_a_few_updates(tmp_path: Path, name: str) -> None:
     assert code == 0
     summary = json.loads((run_dir / "summary.json").read_text())
     config = json.loads((run_dir / "config.json").read_text())
-    wide = sc.mode == "grid" and sc.evader == "random"  # GRID_DEFAULTS
+    wide = sc.evader == "random" and (sc.mode == "grid" or sc.continuous)  # WIDE_DEFAULTS
     batch = 512 if (sc.continuous and sc.evader == "flee") or wide else 128  # the game's
     assert config["train"]["batch_size"] == batch
     assert summary["steps"] == 3 * batch and summary["status"] == "done"

@@ -56,8 +56,8 @@ after runs whose stored configs lack them: they mean the discrete values).
 - Updates: the paper's 5,000 of 128 steps (640,000 steps) in discrete control; in
   continuous control a budget of 2,000,000 steps (200,000 s of play at 10 Hz; both
   algorithms were 1.4–1.7× ``pursuit`` after 384,000), ``steps // batch_size`` updates:
-  15,625 of 128 steps (against the fleeing evader 4,000,000 in 7,812 updates of 512,
-  :data:`FLEE_DEFAULTS`)."""
+  15,625 of 128 steps here, 3,906 of 512 against the random evader (:data:`WIDE_DEFAULTS`),
+  and against the fleeing evader 4,000,000 in 7,812 updates of 512 (:data:`FLEE_DEFAULTS`)."""
 
 
 FLEE_DEFAULTS: dict[str, int] = {"batch_size": 512, "steps": 4_000_000}
@@ -78,27 +78,37 @@ FLEE_DEFAULTS: dict[str, int] = {"batch_size": 512, "steps": 4_000_000}
   evader"."""
 
 
-GRID_DEFAULTS: dict[str, float] = {
+WIDE_DEFAULTS: dict[str, float] = {
     "num_envs": 64,
     "batch_size": 512,
     "lr": 1e-2,
-    "steps": 640_000,
 }
-"""What grid games against the random evader change of :data:`CONTROL_DEFAULTS`: 64 games
-and batches of 512 (8 steps in each game, as before), at a step size of 1e-2, for the
-paper's 640,000 steps (1,250 updates; the paper's 5,000 of 128 with ``--batch-size 128``).
+"""What games against the random evader, on the grid or in continuous control, change of
+:data:`CONTROL_DEFAULTS`: 64 games and batches of 512 (8 steps in each game, as before), at
+a step size of 1e-2, for the same steps in a quarter of the updates.
 
 The learner's cost is mostly per update, not per step, so a quarter of the updates halves
-the main job's training time; the rollout's per-step cost is shared by four times the
-games. Measured on ``grid_collision`` (greedy over 5,000 episodes, 5 seeds, A2CM;
-``BENCHMARKS.md``, "The main job in half the time"): 16 games of 128 at 7e-3 (before)
-2.943 steps on seed 0; 64 of 512 at 7e-3 a median of 2.961 (worst 2.993), at 1e-2 2.949
-(worst 2.959), 128 of 1,024 2.964 (one seed collided); no collision in any other run. With
-these, A2C came to 2.956 (worst 3.261; 2.929 before), ``grid_collision_continue`` to 2.957
-(2.931; one seed collided once in ~1,700 episodes) and ``grid`` to 2.935 (2.929). Against the
-fleeing evader they were far worse (``grid_flee``: A2CM 11.9 steps, A2C 8.0, against 6.1
-and 5.5 with 16 of 128), so it keeps 16 games of 128, as do a learned evader (self-play)
-and physics."""
+the training time; the rollout's per-step cost is shared by four times the games.
+Measured (greedy over 5,000 episodes, 5 seeds, A2CM; ``BENCHMARKS.md``, "The main job in
+half the time"):
+
+- ``grid_collision``: 16 games of 128 at 7e-3 (before) 2.943 steps on seed 0; 64 of 512 at
+  7e-3 a median of 2.961 (worst 2.993), at 1e-2 2.949 (worst 2.959), 128 of 1,024 2.964
+  (one seed collided); no collision in any other run. With these, A2C came to 2.956
+  (worst 3.261; 2.929 before), ``grid_collision_continue`` to 2.957 (2.931; one seed
+  collided once in ~1,700 episodes) and ``grid`` to 2.935 (2.929).
+- ``phys_cont`` (``pursuit``: 17.452 steps on the same episodes): 16 games of 128 (before)
+  17.652 (worst 17.926, 1.011× ``pursuit``); 64 of 512 at 7e-3 17.967 (worst 18.424,
+  1.056×); at 1e-2 17.836 (worst 17.869, 1.022×), in 0.54× the training time.
+  ``phys_cont_collision`` (``pursuit`` 17.416): 18.567 before (worst 19.402, 1.066×;
+  collisions 0.0006 a game), 17.782 with these (worst 18.282, 1.021×; collisions 0).
+- Against the fleeing evader they were far worse (``grid_flee``: A2CM 11.9 steps, A2C 8.0,
+  against 6.1 and 5.5 with 16 of 128), so it keeps 16 games of 128 (and continuous control
+  its :data:`FLEE_DEFAULTS`), as do a learned evader (self-play) and discrete physics."""
+
+GRID_DEFAULTS: dict[str, float] = {**WIDE_DEFAULTS, "steps": 640_000}
+"""Grid games against the random evader: :data:`WIDE_DEFAULTS` for the paper's 640,000
+steps (1,250 updates; the paper's 5,000 of 128 with ``--batch-size 128``)."""
 
 
 ENTROPY: dict[str, tuple[float, Schedule]] = {
@@ -153,12 +163,12 @@ def resolve_train(scenario: Scenario, cfg: Train) -> Train:
     """A run's training settings, resolved: ``cfg`` with its unset (None) keys given the
     values of ``scenario``'s control type (:data:`CONTROL_DEFAULTS`, the shaping weights
     times :func:`step_cost`, continuous control's updates from its step budget) and game
-    (:data:`ENTROPY`, :data:`FLEE_DEFAULTS`, :data:`GRID_DEFAULTS`), then checked against the
-    scenario (:func:`check_train`). Called once, where options enter (the train command, a
-    sweep's runs, the report's plan): what it returns is what ``config.json`` records and
-    the trainer and learner take, and nothing after it resolves or checks again. A batch
-    that the number of games does not divide is a :class:`ConfigError` naming
-    ``batch_size``."""
+    (:data:`ENTROPY`, :data:`FLEE_DEFAULTS`, :data:`GRID_DEFAULTS`, :data:`WIDE_DEFAULTS`),
+    then checked against the scenario (:func:`check_train`). Called once, where options
+    enter (the train command, a sweep's runs, the report's plan): what it returns is what
+    ``config.json`` records and the trainer and learner take, and nothing after it
+    resolves or checks again. A batch that the number of games does not divide is a
+    :class:`ConfigError` naming ``batch_size``."""
     values = dict(CONTROL_DEFAULTS["continuous" if scenario.continuous else "discrete"])
     values["entropy_coef"], values["entropy_schedule"] = ENTROPY[entropy_game(scenario)]
     cost = step_cost(scenario)
@@ -169,6 +179,8 @@ def resolve_train(scenario: Scenario, cfg: Train) -> Train:
     if scenario.mode == "grid" and scenario.evader == "random":
         values.update(GRID_DEFAULTS)
         values.pop("updates")
+    elif scenario.continuous and scenario.evader == "random":
+        values.update(WIDE_DEFAULTS)  # continuous control's step budget stays
     batch = values["batch_size"] if cfg.batch_size is None else cfg.batch_size
     if "steps" in values:
         values["updates"] = values.pop("steps") // batch

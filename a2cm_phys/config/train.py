@@ -22,10 +22,10 @@ class Train:
 
     The paper's hyperparameters are kept (RMSprop 7e-3 as Keras has it, γ 0.99, batch 128,
     5,000 updates, 128 hidden units); what is ours, chosen by the ablation in
-    ``BENCHMARKS.md`` so that the collision scenarios are learned: 16 games (64 in grid
-    games against the random evader, with batches of 512 and a step size of 1e-2,
-    :data:`GRID_DEFAULTS`: the same 640,000 steps in a quarter of the updates), the reward
-    split into its time and collision components, each valued by its own critic output
+    ``BENCHMARKS.md`` so that the collision scenarios are learned: 16 games (64 against the
+    random evader, on the grid and in continuous control, with batches of 512 and a step
+    size of 1e-2, :data:`WIDE_DEFAULTS`: the same steps in a quarter of the updates), the
+    reward split into its time and collision components, each valued by its own critic output
     under PopArt normalisation and weighed on its own scale (``split_rewards``,
     ``value_norm``, ``balance_rewards``), advantages normalised per batch, a linear
     learning-rate anneal, and with discrete actions an entropy coefficient of 0.03 instead

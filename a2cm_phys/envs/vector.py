@@ -1,13 +1,14 @@
 """The batched environment the trainer steps: ``num_envs`` games with auto-reset.
 
 A finished game is restarted within the same ``step`` call; the step still reports the
-finished episode's final observation (``final_obs``, for the truncation bootstrap) and an
-:class:`EpisodeSummary`. Episode seeds come from one generator seeded at ``reset(seed)``.
+finished episode's final observation (``final_obs``, for the truncation bootstrap) and its
+summary (in the step's :class:`~.tallies.EpisodeBatch`). Episode seeds come from one
+generator seeded at ``reset(seed)``.
 
 With a learned evader (SPEC §1b, ``evader = "learned"``) the evader is a second team of one:
 ``step(actions, evader_actions)`` takes its actions too (``(B,)`` int64 moves, or ``(B, 2)``
 float commands with continuous control), and each step and episode report its reward
-(``VecStep.evader_reward``) and return (``EpisodeSummary.evader_ret``) beside the
+(``VecStep.evader_reward``) and return (``EpisodeBatch.evader_ret``) beside the
 pursuers'. It observes the same global state as the pursuers (``obs``).
 
 With sensing on (SPEC §6b) ``obs`` rows are the team vectors of
@@ -28,7 +29,7 @@ from .core import StepOutcome, action_shape, check_joint_actions, evader_reward
 from .evaders.learned import evader_action_shape
 from .factory import make_core
 from .sensing import team_dim, team_observation
-from .tallies import EpisodeSummary, EpisodeTallies
+from .tallies import EpisodeBatch, EpisodeTallies
 
 
 @dataclass
@@ -41,6 +42,7 @@ class VecStep:
     mode) are the agents' positions at the end of this step, before any auto-reset.
     ``reward`` is the pursuers' team reward; ``evader_reward`` a learned evader's (``(B,)``
     float64, see :func:`~.core.evader_reward`), ``None`` with a scripted evader.
+    ``episodes`` are the episodes this step finished, in the order of their games.
     """
 
     obs: np.ndarray
@@ -51,7 +53,7 @@ class VecStep:
     outcome: StepOutcome
     positions: np.ndarray
     velocities: np.ndarray | None
-    episodes: list[EpisodeSummary]
+    episodes: EpisodeBatch
     evader_reward: np.ndarray | None = None
 
 
@@ -75,6 +77,7 @@ class VectorEnv:
         self.core = make_core(scenario, num_envs, workers)
         self._seeds = np.random.default_rng(0)
         self._tallies = EpisodeTallies(num_envs)
+        self._no_episodes = EpisodeBatch.empty(self.learned_evader)
         self._closed = False
 
     def reset(self, seed: int) -> np.ndarray:
@@ -153,7 +156,7 @@ class VectorEnv:
         obs = self.observe() if self._sensing else core.observe()
         positions, velocities = core.positions(), core.velocities()
         done = out.terminated | out.truncated
-        episodes: list[EpisodeSummary] = []
+        episodes = self._no_episodes
         final_obs = obs
         if done.any():
             envs = np.flatnonzero(done)

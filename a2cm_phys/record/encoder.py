@@ -15,6 +15,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from ..config import Scenario
+from ..envs.tallies import EpisodeBatch
 from .block import Block
 from .buffers import StepBuffers
 from .curve import EpisodeCurve
@@ -37,32 +38,29 @@ class _Columns:
     clock at buffer row 0)."""
 
     def __init__(self, finished: list[Finished], first_id: int, base: int, dt: float) -> None:
-        self.events = [f.events for f in finished]
-        self.eps = eps = [f.summary for f in finished]
-        self.ints = ints = np.array(
+        self.events = [e for f in finished for e in f.events]
+        eps = EpisodeBatch.concat([f.summaries for f in finished])
+        self.evader_ret = eps.evader_ret
+        self.ints = ints = np.column_stack(
             [
-                (
-                    e.env,
-                    e.length,
-                    e.collisions,
-                    e.wall_contacts,
-                    e.captured,
-                    e.truncated,
-                    e.collision_terminated,
-                    f.first,
-                    f.last,
-                    f.whole,
-                )
-                for e, f in zip(eps, finished, strict=True)
-            ],
-            dtype=np.int64,
-        ).reshape(-1, 10)
+                eps.env,
+                eps.length,
+                eps.collisions,
+                eps.wall_contacts,
+                eps.captured,
+                eps.truncated,
+                eps.collision_terminated,
+                np.concatenate([f.first for f in finished]),
+                np.repeat([f.last for f in finished], [len(f.first) for f in finished]),
+                np.concatenate([f.whole for f in finished]),
+            ]
+        ).astype(np.int64, copy=False)
         self.env, self.length, self.begin, self.end = ints[:, 0], ints[:, 1], ints[:, 7], ints[:, 8]
         self.whole = ints[:, 9].astype(bool)
-        self.ids = np.arange(first_id, first_id + len(finished))
+        self.ids = np.arange(first_id, first_id + len(ints))
         self._check_in_sync()
-        self.seed = np.array([e.seed for e in eps], dtype=np.uint64)
-        self.returns = np.array([e.ret for e in eps], dtype=np.float64)
+        self.seed = np.asarray(eps.seed, dtype=np.uint64)
+        self.returns = np.asarray(eps.ret, dtype=np.float64)
         self.t0 = (base + self.end - self.length) * dt
         self.t1 = (base + self.end) * dt
 
@@ -70,10 +68,10 @@ class _Columns:
         """A ``RuntimeError`` if a whole episode spans more or fewer rows than its steps."""
         bad = np.flatnonzero(self.whole & (self.end - self.begin != self.length))
         if len(bad):
-            e = self.eps[bad[0]]
+            j = bad[0]
             raise RuntimeError(
-                f"EpisodeRecorder out of sync: env {e.env}: an episode of length {e.length} "
-                f"spans {self.end[bad[0]] - self.begin[bad[0]]} recorded steps "
+                f"EpisodeRecorder out of sync: env {self.env[j]}: an episode of length "
+                f"{self.length[j]} spans {self.end[j] - self.begin[j]} recorded steps "
                 "(record_step every step?)"
             )
 
@@ -128,8 +126,8 @@ class EpisodeEncoder:
         ``buf``, whose row 0 is at ``base`` on the log's clock), made one by one as they
         are taken. A queue out of step with the buffers (``record_step`` not called every
         step) is a ``RuntimeError`` before the first."""
-        first_id, self._next_id = self._next_id, self._next_id + len(finished)
-        cols = _Columns(finished, first_id, base, self.dt)
+        cols = _Columns(finished, self._next_id, base, self.dt)
+        self._next_id += len(cols.ids)
         log_time = int(cols.end.max() + base) * self.step_ns
         every = self.log_every
         logged = cols.whole & (cols.ids % max(every, 1) == 0) & (every > 0)
@@ -159,10 +157,10 @@ class EpisodeEncoder:
 
     def _points(self, cols: _Columns, base: int) -> list[tuple[int, bytes]]:
         """The learning-curve points the block's episodes complete."""
-        ints, eps = cols.ints, cols.eps
+        ints = cols.ints
         extra = {}
         if self.learned:
-            extra["evader_return"] = np.array([e.evader_ret for e in eps], dtype=np.float64)
+            extra["evader_return"] = np.asarray(cols.evader_ret, dtype=np.float64)
         return self._curve.add(
             cols.ids,
             (base + cols.end) * self.step_ns,
@@ -178,11 +176,11 @@ class EpisodeEncoder:
 
     def _summary(self, cols: _Columns, logged: np.ndarray) -> bytes:
         """The summary block: every episode's summary, column by column."""
-        eps, ints = cols.eps, cols.ints
+        ints = cols.ints
         flags = ints[:, 4:7].astype(bool)
         returns = {"return": json_array(cols.returns)}
         if self.learned:
-            evader = np.array([e.evader_ret for e in eps], dtype=np.float64)
+            evader = np.asarray(cols.evader_ret, dtype=np.float64)
             returns["evader_return"] = json_array(evader)
         return json_object(
             episode=json_array(cols.ids),

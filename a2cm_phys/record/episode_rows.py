@@ -1,9 +1,9 @@
 """Where each game's episode lies in the recorder's step buffers, and the finished episodes
 waiting to be written.
 
-Each vector step takes the next buffer row (:mod:`.buffers`); an episode that finishes in
-it is queued as a :class:`Finished` (its summary and rows), and its game's next episode
-begins at that row. When the buffers are full, the rows older than every running episode
+Each vector step takes the next buffer row (:mod:`.buffers`); the episodes that finish in
+it are queued as a :class:`Finished` (their summaries and rows), and their games' next
+episodes begin at that row. When the buffers are full, the rows older than every running episode
 are dropped (after the queue has been written, since its episodes live in those rows).
 """
 
@@ -13,20 +13,22 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..envs.vector import EpisodeSummary, VecStep, VectorEnv
+from ..envs.tallies import EpisodeBatch
+from ..envs.vector import VecStep, VectorEnv
 from .buffers import StepBuffers
 
 
 class Finished(NamedTuple):
-    """A finished episode waiting to be written: its summary, the buffer rows of its start
-    state (``first``) and last step (``last``), its contact events (physics, or grid games
-    with some; else ``None``) and whether the log holds it from its start (``whole``)."""
+    """The episodes one vector step finished, waiting to be written: their summaries, the
+    buffer rows of their start states (``first``, per episode) and of the step (``last``),
+    their contact events (per episode: physics, or grid games with some; else ``None``) and
+    whether the log holds each from its start (``whole``)."""
 
-    summary: EpisodeSummary
-    first: int
+    summaries: EpisodeBatch
+    first: np.ndarray
     last: int
-    events: list | None
-    whole: bool
+    events: list[list | None]
+    whole: np.ndarray
 
 
 class EpisodeRows:
@@ -45,7 +47,7 @@ class EpisodeRows:
         self._vec = vec_env
         b = vec_env.num_envs
         self._events: list[list] = [[] for _ in range(b)]
-        self._begin = [0] * b  # buffer row of each game's episode start
+        self._begin = np.zeros(b, dtype=np.int64)  # buffer row of each game's episode start
         # Games already inside an episode (a resumed run): their first steps are not ours to
         # log, so those episodes get a summary but no trajectory.
         t = np.asarray(getattr(vec_env.core, "t", 0))
@@ -69,30 +71,33 @@ class EpisodeRows:
             for i, game_events in enumerate(out.events):
                 if game_events:
                     events[i].extend(game_events)
-        if step.episodes:
+        eps = step.episodes
+        if eps:
             buf.write_starts(r, self._vec)
-            begin, queue = self._begin, self._queue
-            physics = buf.vel is not None
-            for e in step.episodes:
-                ev = None
-                if physics or events[e.env]:
-                    ev, events[e.env] = events[e.env], []
-                whole = e.env not in self._partial
-                self._partial.discard(e.env)
-                queue.append(Finished(e, begin[e.env], r, ev, whole))
-                begin[e.env] = r
+            games = eps.env.tolist()
+            ev: list[list | None] = [None] * len(games)
+            if buf.vel is not None or out.events is not None or any(events):
+                for j, g in enumerate(games):
+                    if buf.vel is not None or events[g]:
+                        ev[j], events[g] = events[g], []
+            whole = np.ones(len(games), dtype=bool)
+            if self._partial:
+                whole[:] = [g not in self._partial for g in games]
+                self._partial.difference_update(games)
+            self._queue.append(Finished(eps, self._begin[eps.env], r, ev, whole))
+            self._begin[eps.env] = r
 
     def take(self) -> list[Finished]:
-        """The queued episodes, in finishing order; the queue is left empty."""
+        """The queued steps' episodes, in finishing order; the queue is left empty."""
         queue, self._queue = self._queue, []
         return queue
 
     def compact(self) -> None:
         """Drop the rows older than every running episode (the queue must be empty), and
         grow the buffers if an episode fills them on its own."""
-        first = min(self._begin)
+        first = int(self._begin.min())
         self.buf.keep(first, self._row)
-        self._begin = [b - first for b in self._begin]
+        self._begin -= first
         self._row -= first
         self.base += first
         if self._row + 1 >= self.buf.rows:  # an episode longer than the buffer: grow it

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 if TYPE_CHECKING:
-    from ..envs.vector import EpisodeSummary
+    from ..envs.tallies import EpisodeBatch
 
 
 class EpisodeStats:
@@ -31,16 +30,19 @@ class EpisodeStats:
         # (length, return, collisions, a learned evader's return or NaN)
         self.recent: deque[tuple[int, float, int, float]] = deque(maxlen=window)
 
-    def add(self, episodes: Iterable[EpisodeSummary]) -> None:
+    def add(self, episodes: EpisodeBatch) -> None:
         """Count finished episodes (in the order they finished)."""
-        for ep in episodes:
-            self.episodes += 1
-            self.captures += ep.captured
-            self.truncations += ep.truncated
-            self.collision_ends += ep.collision_terminated
-            self.collisions += ep.collisions
-            evader = ep.evader_ret if ep.evader_ret is not None else math.nan
-            self.recent.append((ep.length, ep.ret, ep.collisions, evader))
+        self.episodes += len(episodes)
+        self.captures += int(np.count_nonzero(episodes.captured))
+        self.truncations += int(np.count_nonzero(episodes.truncated))
+        self.collision_ends += int(np.count_nonzero(episodes.collision_terminated))
+        self.collisions += int(episodes.collisions.sum())
+        last = slice(-self.window, None)  # only the window's worth can stay in it
+        lengths, collisions = episodes.length[last].tolist(), episodes.collisions[last].tolist()
+        evader = episodes.evader_ret
+        evader = evader[last].tolist() if evader is not None else [math.nan] * len(lengths)
+        returns = episodes.ret[last].tolist()
+        self.recent.extend(zip(lengths, returns, collisions, evader, strict=True))
 
     def recent_mean(self, column: int, last: int | None = None) -> float:
         """Mean of column 0 (length), 1 (return), 2 (collisions) or 3 (a learned evader's

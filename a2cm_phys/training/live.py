@@ -25,7 +25,8 @@ from typing import Any
 import numpy as np
 
 from ..config import Scenario
-from ..envs.vector import EpisodeSummary, VecStep, VectorEnv
+from ..envs.tallies import EpisodeBatch
+from ..envs.vector import VecStep, VectorEnv
 from ..record.curve import EpisodeCurve, update_point
 from ..record.runlog import Trajectory
 from ..record.scene import episode_frame
@@ -85,7 +86,7 @@ class LiveView:
         )
         self._plot_every = plot_every
         self._curve: EpisodeCurve | None = None
-        self._pending: list[tuple[int, int, list[EpisodeSummary]]] = []  # (first id, step, …)
+        self._pending: list[tuple[int, int, EpisodeBatch]] = []  # (first id, step, …)
         self._curve_watched, self._points_due, self._update_due = False, 0.0, 0.0
         self._vec: VectorEnv | None = None
         self._steps = self._episodes = 0
@@ -178,19 +179,19 @@ class LiveView:
         pending, self._pending = self._pending, []
         if not pending or self._curve is None:
             return
-        eps = [e for _, _, step_eps in pending for e in step_eps]
+        eps = EpisodeBatch.concat([step_eps for _, _, step_eps in pending])
         ids = np.arange(pending[0][0], pending[0][0] + len(eps))  # all since the last sending
         ends = np.repeat([s for _, s, _ in pending], [len(e) for _, _, e in pending])
         columns = {
-            "length": [e.length for e in eps],
-            "return": [e.ret for e in eps],
-            "captured": [e.captured for e in eps],
-            "collision_terminated": [e.collision_terminated for e in eps],
-            "truncated": [e.truncated for e in eps],
-            "collisions": [e.collisions for e in eps],
-            "wall_contacts": [e.wall_contacts for e in eps],
+            "length": eps.length,
+            "return": eps.ret,
+            "captured": eps.captured,
+            "collision_terminated": eps.collision_terminated,
+            "truncated": eps.truncated,
+            "collisions": eps.collisions,
+            "wall_contacts": eps.wall_contacts,
         }
         if self._curve.learned:
-            columns["evader_return"] = [e.evader_ret for e in eps]
+            columns["evader_return"] = eps.evader_ret
         for time_ns, data in self._curve.add(ids, ends * self._step_ns, **columns):
             self._points.log(data, log_time=time_ns)

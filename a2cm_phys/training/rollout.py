@@ -19,7 +19,8 @@ from collections.abc import Callable
 import numpy as np
 
 from ..envs.core import REWARD_PARTS, reward_parts
-from ..envs.vector import EpisodeSummary, VecStep, VectorEnv
+from ..envs.tallies import EpisodeBatch
+from ..envs.vector import VecStep, VectorEnv
 
 Policy = Callable[[np.ndarray, np.random.Generator], np.ndarray]
 """``policy(obs (B, obs_dim), rng) -> actions (B, N, *action_shape)``.
@@ -90,7 +91,7 @@ def collect(
     batch: dict[str, np.ndarray],
     on_step: StepHook | None = None,
     evader: tuple[Policy, dict[str, np.ndarray]] | None = None,
-) -> tuple[np.ndarray, list[EpisodeSummary]]:
+) -> tuple[np.ndarray, EpisodeBatch]:
     """Step ``env`` ``len(batch["obs"])`` times from ``obs``, writing into ``batch``.
 
     ``evader`` is a learned evader's ``(policy, batch)`` (see :func:`allocate_evader_batch`):
@@ -103,7 +104,7 @@ def collect(
     b_term, b_trunc, b_final = batch["terminated"], batch["truncated"], batch["final_obs"]
     b_parts, b_coll = batch["reward_parts"], batch["collisions"]
     scenario = env.scenario
-    episodes: list[EpisodeSummary] = []
+    episodes: list[EpisodeBatch] = []
     for t in range(len(b_obs)):
         b_obs[t] = obs
         actions = policy(obs, rng)
@@ -123,7 +124,7 @@ def collect(
         b_trunc[t] = step.truncated
         b_final[t] = step.final_obs
         if step.episodes:
-            episodes.extend(step.episodes)
+            episodes.append(step.episodes)
             ended = step.terminated | step.truncated
             episodes_ended(policy, ended)
             if evader is not None:
@@ -132,4 +133,6 @@ def collect(
             on_step(actions, step)
         obs = step.obs
     batch["next_obs"][:] = obs
-    return obs, episodes
+    if not episodes:
+        return obs, EpisodeBatch.empty(env.learned_evader)
+    return obs, EpisodeBatch.concat(episodes)
