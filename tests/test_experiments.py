@@ -21,6 +21,7 @@ from a2cm_phys.analysis.stats import (
     welch_p,
 )
 from a2cm_phys.commands import experiments
+from a2cm_phys.study.report.claim import Claim, claims_table
 
 TINY = [
     "--seeds", "0", "--modes", "grid", "--updates", "3", "--cont-updates", "3",
@@ -37,7 +38,8 @@ def test_report_end_to_end_on_tiny_budgets(
     argv = [*TINY, "--logdir", str(logdir), "--out", str(out)]
     assert experiments.main([*argv, "--dry-run"]) == 0
     dry = capsys.readouterr().out
-    assert "20 runs" in dry and "paper/grid_collision-a2cm-paper-s0: new" in dry
+    assert "22 runs" in dry and "paper/grid_collision-a2cm-paper-s0: new" in dry
+    assert "descent/grid_vs-a2cm-descent-s0: new" in dry
     assert re.search(r"continuous: 6 runs \(6 new.*wall", dry) and "estimated total" in dry
     assert not (out / "RESULTS.md").exists()
 
@@ -57,7 +59,9 @@ def test_report_end_to_end_on_tiny_budgets(
         "self-play evader outlasts the random and fleeing evaders",
     ):
         assert claim in claims, claim
-    assert re.search(r"\*\*(holds|does not hold|inconclusive)\*\* \| Welch t", claims)
+    # one seed a side: every verdict is inconclusive and says why
+    assert re.search(r"\*\*inconclusive\*\* \(n = 1\) \| Welch t", claims)
+    assert not re.search(r"\*\*(holds|does not hold)\*\* \(n = 1", claims)
     assert "truncated to 5 steps" in claims  # --exploit-max-steps is said
     assert "[s0](../runs/paper/grid-a2cm-paper-s0)" in text  # rows link their runs
     assert "2.939 (optimum)" in text and "82,119" in text
@@ -71,7 +75,7 @@ def test_report_end_to_end_on_tiny_budgets(
         assert (out / name).stat().st_size > 10_000, name
     assert (out / "figures" / "paper_grid_lengths.png").exists()
     data = json.loads((out / "results.json").read_text())
-    assert len(data["runs"]) == 20 and data["claims"]
+    assert len(data["runs"]) == 22 and data["claims"]
     assert (logdir / "paper" / "grid-a2c-paper-s0" / "report_eval.json").exists()
 
     # again: every run is skipped, every measurement comes from the caches; a run named
@@ -82,15 +86,32 @@ def test_report_end_to_end_on_tiny_budgets(
     assert experiments.main(argv) == 0
     err = capsys.readouterr().err
     assert "paper/grid-a2cm-s0: skipped" in err and ": ran\n" not in err
-    assert "runs: started (20 runs)" in err and "runs: done, 20/20 runs" in err  # progress
+    assert "runs: started (22 runs)" in err and "runs: done, 22/22 runs" in err  # progress
     assert not (logdir / "paper" / "grid-a2cm-paper-s0").exists()
     assert "[s0](../runs/paper/grid-a2cm-s0)" in (out / "RESULTS.md").read_text()
+
+    # the runs as the repository keeps them (docs/runs, .gitignore): no log, and no
+    # checkpoint but those the cross-play plays; the same report, figures and all
+    text = (out / "RESULTS.md").read_text()
+    for f in [*logdir.rglob("episodes*.mcap"), *logdir.rglob("checkpoint*.pt")]:
+        played = {"selfplay", "descent"} & set(f.parts) or f.parent.name.startswith("grid-a2cm")
+        if f.name != "checkpoint.pt" or not played or "paper" in f.parts:
+            f.unlink()
+    figures = {f: f.stat().st_mtime_ns for f in (out / "figures").glob("*.png")}
+    assert experiments.main([*argv, "--report-only"]) == 0
+    again = (out / "RESULTS.md").read_text()
+    assert again.split("## Claims")[1].split("Total wall time")[0] == (
+        text.split("## Claims")[1].split("Total wall time")[0]
+    )
+    assert all(f.stat().st_mtime_ns > t for f, t in figures.items())  # drawn again
+    assert "could not be measured" not in again
 
     # a run that is missing is listed, not fatal
     (logdir / "ours" / "grid-a2c-s0" / "summary.json").unlink()
     assert experiments.main([*argv, "--groups", "ours", "--report-only"]) == 0
     text = (out / "RESULTS.md").read_text()
-    assert "Cells that could not be run" in text and "`ours/grid-a2c-s0`: interrupted" in text
+    assert "Cells that could not be run" in text  # (its checkpoint went above: not run)
+    assert "`ours/grid-a2c-s0`: not run" in text
 
 
 @pytest.mark.parametrize(
@@ -160,12 +181,28 @@ def test_mean_interval_floor_clips_only_the_lower_bound() -> None:
     assert mean_interval(rates)[2] > 1.0 and mean_interval(rates, ceiling=1.0)[2] == 1.0
 
 
+def test_a_claim_names_its_samples_and_one_sample_decides_nothing() -> None:
+    def claim(verdict: str, sizes: tuple[int, ...]) -> Claim:
+        return Claim("paper", "c", "s", "m", "i", verdict, "t", "", sizes)
+
+    assert claim("holds", (5, 5)).verdict == "holds"
+    assert claim("holds", (5, 5)).evidence == "n = 5 vs 5"
+    assert claim("does not hold", (1, 1)).verdict == "inconclusive"
+    assert claim("does not hold", (1, 1)).evidence == "n = 1"
+    assert claim("holds", (3, 1)).verdict == "inconclusive"
+    assert claim("holds", (3, 1)).evidence == "n = 3 vs 1"
+    assert claim("holds", (4,)).evidence == "n = 4" and claim("holds", ()).evidence == ""
+    row = claims_table([claim("does not hold", (1, 1))])[-1]
+    assert "**inconclusive** (n = 1) |" in row
+
+
 def test_welch_p_one_sided_and_degenerate_cases() -> None:
     a, b = [5.0, 6.0, 7.0], [1.0, 2.0, 3.0]
     # t = 4 / sqrt(2/3) with Welch df 4: a hand-checkable p
     assert welch_p(a, b) == pytest.approx(st.t.sf(4 / np.sqrt(2 / 3), 4))
     assert welch_p(a, b, "less") == pytest.approx(1 - welch_p(a, b))
     assert np.isnan(welch_p([1.0], b))  # one seed: no test
+    assert np.isnan(welch_p([853.0], [695.0]))  # one against one, however far apart
     assert welch_p([2.0, 2.0], [1.0, 1.0]) == 0.0  # no variance, different: certain
     assert np.isnan(welch_p([1.0, 1.0], [1.0, 1.0]))
 
@@ -215,5 +252,7 @@ def test_cross_play_cache_tells_a_retrained_run_from_the_old_one(tmp_path: Path)
     (run / "checkpoint.pt").write_bytes(b"old")
     before = _stamped((str(run), "random"))
     assert before[1] == "random"  # named policies are their own identity
-    os.utime(run / "checkpoint.pt", ns=(1, 1))  # trained again in the same directory
+    os.utime(run / "checkpoint.pt", ns=(1, 1))  # a copy of the run (a clone): the same
+    assert _stamped((str(run), "random")) == before
+    (run / "checkpoint.pt").write_bytes(b"new")  # trained again in the same directory
     assert _stamped((str(run), "random"))[0] != before[0]

@@ -61,12 +61,15 @@ class Panel:
 
 def binned(run: Run, column: str, edges: np.ndarray) -> np.ndarray:
     """The mean of ``column`` over the episodes ending in each env-step bin (``nan`` where
-    none ends)."""
+    none ends); rows of a thinned series (:func:`~.run_series.thinned`) count as their
+    ``episodes``."""
     x = run.columns["env_steps"]
     y = run.columns[column].astype(np.float64)
+    weight = run.columns.get("episodes")
+    w = np.ones(len(y)) if weight is None else np.asarray(weight, dtype=np.float64)
     idx = np.clip(np.searchsorted(edges, x, side="left") - 1, 0, len(edges) - 2)
-    sums = np.bincount(idx, y, minlength=len(edges) - 1)
-    counts = np.bincount(idx, minlength=len(edges) - 1)
+    sums = np.bincount(idx, y * w, minlength=len(edges) - 1)
+    counts = np.bincount(idx, w, minlength=len(edges) - 1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
 

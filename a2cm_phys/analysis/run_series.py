@@ -93,6 +93,40 @@ def load_logged_run(path: Path) -> Run:
     )
 
 
+CURVE_BINS = 400
+"""Env-step bins of a :func:`thinned` series: ~7 per bin of a 60-bin figure."""
+
+CURVE_COLUMNS = ("length", "return", "collisions", "captured", "time", "collision_part")
+"""The per-episode columns a :func:`thinned` series keeps (their means per bin)."""
+
+
+def thinned(run: Run, bins: int = CURVE_BINS) -> dict[str, list[float]]:
+    """``run``'s series in ``bins`` equal env-step bins: each non-empty bin's last env step
+    (``env_steps``), its number of episodes (``episodes``) and their mean of each of
+    :data:`CURVE_COLUMNS`; a few kilobytes of JSON, kept beside a run whose log may go.
+    :func:`thinned_run` reads it back, and :func:`~.figures.binned` weighs its rows by
+    ``episodes``, so that a figure of it matches the full series' to within a bin."""
+    x = run.columns["env_steps"].astype(np.float64)
+    edges = np.linspace(0.0, max(float(x.max(initial=0)), 1.0), bins + 1)
+    idx = np.clip(np.searchsorted(edges, x, side="left") - 1, 0, bins - 1)
+    counts = np.bincount(idx, minlength=bins)
+    keep = counts > 0
+    last = np.zeros(bins)
+    np.maximum.at(last, idx, x)
+    out = {"env_steps": last[keep], "episodes": counts[keep]}
+    for key in CURVE_COLUMNS:
+        sums = np.bincount(idx, run.columns[key].astype(np.float64), minlength=bins)
+        out[key] = sums[keep] / counts[keep]
+    return {k: np.asarray(v).tolist() for k, v in out.items()}
+
+
+def thinned_run(doc: dict[str, list[float]], label: str, title: str) -> Run:
+    """A :class:`Run` of a :func:`thinned` series (one row per bin, weighed by
+    ``episodes``)."""
+    columns = {k: np.asarray(v, dtype=np.float64) for k, v in doc.items()}
+    return Run(label=label, title=title, columns=columns, clean=True)
+
+
 def run_label_of(path: Path, log: RunLog) -> str:
     """A run's label in plots: the log's own ``label`` if it has one, else the run folder's
     (:func:`~a2cm_phys.training.runs.run_label`: ``A2CM``, ``A2CM (paper)`` for a run of the

@@ -124,16 +124,20 @@ def mean_interval(
 def welch_p(a: Iterable[float], b: Iterable[float], alternative: str = "greater") -> float:
     """One-sided p-value of Welch's t-test (scipy ``ttest_ind``, unequal variances) that
     ``mean(a)`` is greater (``alternative="greater"``) or less than ``mean(b)``; ``nan``
-    with fewer than two finite values on a side, or no variance on either."""
+    with fewer than two finite values on a side (one seed against one decides nothing, even
+    where they differ), or with equal values throughout; 0 or 1 where both sides have no
+    variance and differ."""
     from scipy import stats as st
 
     x = np.asarray(list(a), dtype=np.float64)
     y = np.asarray(list(b), dtype=np.float64)
     x, y = x[np.isfinite(x)], y[np.isfinite(y)]
-    if x.size < 2 or y.size < 2 or (x.std() == 0 and y.std() == 0):
-        if x.size and y.size and x.std() == 0 and y.std() == 0 and x[0] != y[0]:
-            return 0.0 if (x[0] > y[0]) == (alternative == "greater") else 1.0
+    if x.size < 2 or y.size < 2:  # one sample a side has no spread: nothing to test
         return float("nan")
+    if x.std() == 0 and y.std() == 0:  # repeated exactly: certain if they differ
+        if x[0] == y[0]:
+            return float("nan")
+        return 0.0 if (x[0] > y[0]) == (alternative == "greater") else 1.0
     return float(st.ttest_ind(x, y, equal_var=False, alternative=alternative).pvalue)
 
 

@@ -1,6 +1,7 @@
 """The reproduction report: every claim of the paper and ours, from real runs.
 
-    python -m a2cm_phys.experiments [--groups paper,ours,continuous,selfplay] [--seeds 0-4]
+    python -m a2cm_phys.experiments [--groups paper,ours,continuous,selfplay,descent]
+        [--seeds 0-4]
         [--dry-run] [--sequential] [--logdir logs/experiments] [--out docs]
 
 Groups of cells (scenario × algorithm × seed), each a sweep in ``<logdir>/<group>/``
@@ -8,14 +9,16 @@ Groups of cells (scenario × algorithm × seed), each a sweep in ``<logdir>/<gro
 
 - ``paper``: the paper's three experiments (SPEC §4, §7) × A2C/A2CM × grid/physics with
   ``--preset paper`` (the faithful reproduction), ``--updates`` each (the paper: 5,000);
-- ``ours``: the same with our defaults;
+- ``ours``: the same with our defaults (as shipped, unless ``--updates``);
 - ``continuous``: ``phys_cont``, ``phys_cont_flee``, ``phys_cont_collision`` × A2C/A2CM,
   beside ``pursuit`` played on the same scenario (``--cont-updates``, by default
   continuous control's step budget, 2,000,000 or 4,000,000 against the fleeing evader;
   ``--cont-set``);
 - ``selfplay``: ``grid_vs`` × A2C/A2CM pursuers against a learning evader, the cross-play
   table and the exact exploitability of the final actors (``--exploit-max-steps``
-  truncates the best response's horizon, ``--no-exploit`` skips it).
+  truncates the best response's horizon, ``--no-exploit`` skips it);
+- ``descent``: the same game with ``--preset descent`` (both teams learn by exploitability
+  descent), with the same exact measures beside the game's value bracket.
 
 Before training, one short timed run per cell type gives the wall-time estimate per group
 (``--dry-run`` lists the runs and the estimate, and stops). The report ``<out>/RESULTS.md``
@@ -38,14 +41,17 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..config import CONTROL_DEFAULTS, FLEE_DEFAULTS, ConfigError, load_train
+from ..config import ConfigError, load_train
+from ..study.report.build import build_report, record_session
 from ..study.report.plan import (
     ALGOS,
     EXPERIMENTS,
     GROUPS,
     MODES,
+    SELF_PLAY_GROUPS,
     GroupOptions,
     PlannedRun,
+    budgets,
     check_groups,
     estimate_seconds,
     plan,
@@ -90,8 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--updates",
         type=int_range(1),
-        default=5000,
-        help="updates of the paper/ours runs (the paper's 5,000 by default)",
+        help="updates of the paper/ours runs (default: the paper's 5,000 with its method,"
+        " the shipped defaults with ours)",
     )
     p.add_argument(
         "--cont-updates",
@@ -100,7 +106,10 @@ def build_parser() -> argparse.ArgumentParser:
         " at 10 Hz; 4,000,000 against the fleeing evader)",
     )
     p.add_argument(
-        "--selfplay-updates", type=int_range(1), default=5000, help="updates of the self-play runs"
+        "--selfplay-updates",
+        type=int_range(1),
+        help="updates of the self-play and descent runs (default: the shipped defaults,"
+        " and the descent preset's)",
     )
     for flag, what in _SET_FLAGS:
         p.add_argument(
@@ -175,12 +184,13 @@ def _options(args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, GroupO
     if sp_scenario:
         raise ConfigError(f"--selfplay-set {next(iter(sp_scenario))}: only train.KEY=VALUE")
     options = {
-        "paper": GroupOptions({"updates": args.updates}),
-        "ours": GroupOptions({"updates": args.updates}),
+        "paper": GroupOptions(_given("updates", args.updates)),
+        "ours": GroupOptions(_given("updates", args.updates)),
         "continuous": GroupOptions(
             {**_given("updates", args.cont_updates), **cont_train}, cont_scenario
         ),
-        "selfplay": GroupOptions({"updates": args.selfplay_updates, **sp_train}),
+        "selfplay": GroupOptions({**_given("updates", args.selfplay_updates), **sp_train}),
+        "descent": GroupOptions({**_given("updates", args.selfplay_updates), **sp_train}),
     }
     return base, options
 
@@ -220,7 +230,7 @@ def print_plan(
                 estimate_seconds(
                     r,
                     estimates[(group, r.cell.scenario)],
-                    args.crossplay_episodes if group == "selfplay" else args.eval_episodes,
+                    args.crossplay_episodes if group in SELF_PLAY_GROUPS else args.eval_episodes,
                     horizon,
                 )
                 for r in mine
@@ -278,15 +288,16 @@ def _main(argv: Sequence[str]) -> int:
         try:
             use_ray = _train(runs, groups, logdir, args, errors)
         except KeyboardInterrupt:
+            # the session's time still counts towards the report's total
+            record_session(logdir, _meta(args, argv, False, budgets(runs)), start)
             print(
                 "interrupted: finished runs are kept; run the same command to go on, or"
                 " add --report-only for a report of what exists",
                 file=sys.stderr,
             )
             return 130
-    from ..study.report.build import build_report
 
-    meta = _meta(args, argv, use_ray)
+    meta = _meta(args, argv, use_ray, budgets(runs))
     missing = build_report(runs, errors, out, logdir, meta, start, args, groups, modes)
     print(f"report: {out / 'RESULTS.md'}")
     for run, why in missing:
@@ -333,15 +344,10 @@ def _train(
     return use_ray
 
 
-def _meta(args: argparse.Namespace, argv: Sequence[str], use_ray: bool) -> dict[str, Any]:
+def _meta(
+    args: argparse.Namespace, argv: Sequence[str], use_ray: bool, budget: str
+) -> dict[str, Any]:
     """What the report says of this session: its command, date, machine, budgets."""
-    continuous = (
-        f"{args.cont_updates:,} updates"
-        if args.cont_updates
-        else f"{CONTROL_DEFAULTS['continuous']['steps']:,} steps in updates of 128"
-        f" ({FLEE_DEFAULTS['steps']:,} in updates of {FLEE_DEFAULTS['batch_size']} against"
-        " the fleeing evader)"
-    )
     return {
         "command": shlex.join(["python", "-m", "a2cm_phys.experiments", *argv]),
         "date": datetime.now().strftime("%Y-%m-%d"),
@@ -350,8 +356,7 @@ def _meta(args: argparse.Namespace, argv: Sequence[str], use_ray: bool) -> dict[
         "parallel": "on Ray" if use_ray else _parallel(args)[1],
         "seeds": args.seeds,
         "eval_episodes": args.eval_episodes,
-        "budget": f"Updates of 128 steps: {args.updates:,} (paper, ours), "
-        f"{args.selfplay_updates:,} (self-play); continuous: {continuous}.",
+        "budget": budget,
     }
 
 

@@ -12,7 +12,8 @@ from typing import Any
 
 from ...base.versions import __version__
 from ..watch import RunsProgress
-from .claims import Claim, Data, our_claims, paper_claims
+from .claim import Claim, Data, team_name
+from .claims import our_claims, paper_claims
 from .markdown import report
 from .measure import (
     RunResult,
@@ -23,7 +24,7 @@ from .measure import (
     oracle_worst_case,
     reference,
 )
-from .plan import EXPERIMENTS, PlannedRun
+from .plan import EXPERIMENTS, SELF_PLAY_GROUPS, PlannedRun
 
 
 def session_totals(sessions: list[dict[str, Any]]) -> dict[str, Any]:
@@ -94,18 +95,16 @@ def collect(
 
 def _figures(data: Data, out: Path, groups: list[str], modes: list[str]) -> dict[str, Path]:
     from ...analysis.figures import Panel, Reference, plot_aggregate
-    from ...analysis.run_series import Run, load_logged_run
-    from ...record.runlog import LogError
+    from ...analysis.run_series import Run, thinned_run
     from ...training.runs import run_label
 
     def loaded(results: list[RunResult]) -> list[Run]:
-        out = []
-        for r in results:
-            try:  # a run without a finished episode (e.g. a tiny budget) draws nothing
-                out.append(load_logged_run(r.run.run_dir))
-            except LogError:
-                continue
-        return out
+        # a run without a finished episode (e.g. a tiny budget) has no curve: draws nothing
+        return [
+            thinned_run(r.curve, run_label(r.run.run_dir), r.run.cell.scenario)
+            for r in results
+            if r.curve
+        ]
 
     def ref_of(scenario: str) -> Reference | None:
         ref = data.references.get(scenario) or data.pursuit.get(scenario)
@@ -135,8 +134,9 @@ def _figures(data: Data, out: Path, groups: list[str], modes: list[str]) -> dict
         from .plan import CONTINUOUS
 
         layouts.append(("continuous", "physics", [panel("continuous", s, s) for s in CONTINUOUS]))
-    if "selfplay" in groups:
-        layouts.append(("selfplay", "grid", [panel("selfplay", "grid_vs", "grid_vs")]))
+    for group in SELF_PLAY_GROUPS:
+        if group in groups:
+            layouts.append((group, "grid", [panel(group, "grid_vs", "grid_vs")]))
     written = {}
     names = {"paper": "paper's method", "ours": "our defaults"}
     for group, mode, panels in layouts:
@@ -148,7 +148,7 @@ def _figures(data: Data, out: Path, groups: list[str], modes: list[str]) -> dict
             ("length", "lengths", "Steps per episode"),
             ("return", "returns", "Return ÷ the reference's"),
         ):
-            if group == "selfplay" and column == "return":
+            if group in SELF_PLAY_GROUPS and column == "return":
                 continue
             path = out / "figures" / f"{group}_{mode}_{kind}.png"
             plot_aggregate(panels, column, path, f"{title} ({what}; mean of seeds, 95% band)")
@@ -174,7 +174,7 @@ def build_report(
     by_cell, missing = collect(runs, errors, args.eval_episodes)
     data = Data(by_cell, {}, modes=modes, groups=groups)
     add_references(data, runs, args.eval_episodes, cache)
-    crossplay = add_self_play(data, args, cache) if "selfplay" in groups else []
+    crossplay = add_self_play(data, args, cache)
     figures = _figures(data, out, groups, modes)
     claims = paper_claims(data) + our_claims(data)
     elapsed, sessions = record_session(logdir, meta, start)
@@ -206,10 +206,16 @@ def add_references(data: Data, runs: list[PlannedRun], episodes: int, cache: Pat
 
 
 def add_self_play(data: Data, args: argparse.Namespace, cache: Path) -> list[dict[str, Any]]:
-    """The self-play group's exact measures into ``data`` (unless ``--no-exploit``): each
-    run's exploitability, the oracle's worst case and the minimax bounds; then the
-    cross-play table (also ``data.crossplay``), or ``[]`` with no learned side to play."""
-    sp = {a: data.runs("selfplay", "grid_vs", a) for a in ("a2cm", "a2c")}
+    """The self-play groups' exact measures into ``data`` (unless ``--no-exploit``): each
+    run's exploitability (``data.exploit``, by ``group/algo``), the oracle's worst case and
+    the minimax bounds (the game's value bracket); then the cross-play table (also
+    ``data.crossplay``), or ``[]`` with no learned side to play."""
+    sp = {
+        f"{group}/{algo}": data.runs(group, "grid_vs", algo)
+        for group in SELF_PLAY_GROUPS
+        for algo in ("a2cm", "a2c")
+    }
+    sp = {key: results for key, results in sp.items() if results}
     horizon = args.exploit_max_steps
     if any(sp.values()) and not args.no_exploit:
         runs = sum(len(results) for results in sp.values())
@@ -220,11 +226,11 @@ def add_self_play(data: Data, args: argparse.Namespace, cache: Path) -> list[dic
             progress.started("minimax")
             data.minimax = minimax_bounds("grid_vs", horizon, cache)
             progress.finished("minimax")
-            for algo, results in sp.items():
-                data.exploit[algo] = []
+            for key, results in sp.items():
+                data.exploit[key] = []
                 for r in results:
                     progress.started(r.run.run_dir.name)
-                    data.exploit[algo].append({**exploit(r.run, horizon), "seed": r.seed})
+                    data.exploit[key].append({**exploit(r.run, horizon), "seed": r.seed})
                     progress.finished(r.run.run_dir.name)
     pursuers, evaders = crossplay_sides(data, sp)
     if len(pursuers) <= 1:
@@ -237,15 +243,15 @@ def crossplay_sides(
     data: Data, selfplay: dict[str, list[RunResult]]
 ) -> tuple[dict[str, list[str]], dict[str, list[str]]]:
     """The cross-play's pursuer and evader groups: the named policies, each self-play
-    algorithm's runs (seeds in order) on both sides, and our A2CM trained against the
-    random evader as pursuers."""
+    group's algorithms' runs (``selfplay`` keyed by ``group/algo``; seeds in order) on both
+    sides, and our A2CM trained against the random evader as pursuers."""
     pursuers: dict[str, list[str]] = {"oracle": ["oracle"], "minimax": ["minimax"]}
     evaders: dict[str, list[str]] = {"random": ["random"], "flee": ["flee"]}
-    for algo, results in selfplay.items():
+    for key, results in selfplay.items():
         dirs = [str(r.run.run_dir) for r in sorted(results, key=lambda r: r.seed)]
         if dirs:
-            pursuers[f"{algo.upper()} self-play"] = dirs
-            evaders[f"{algo.upper()} self-play evader"] = dirs
+            pursuers[team_name(key)] = dirs
+            evaders[f"{team_name(key)} evader"] = dirs
     vs_random = data.runs("ours", "grid", "a2cm")
     if vs_random:
         pursuers["A2CM vs random (ours)"] = [

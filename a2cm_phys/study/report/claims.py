@@ -4,7 +4,6 @@ stratified-bootstrap probabilities of improvement)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -12,7 +11,6 @@ import numpy as np
 from ...analysis.stats import (
     HOLDS,
     UNSURE,
-    Interval,
     mean_interval,
     probability_of_improvement,
     ratio_interval,
@@ -20,6 +18,7 @@ from ...analysis.stats import (
     verdict_test,
     welch_p,
 )
+from .claim import Claim, Data, ci_text, fmt, p_text, team_name
 from .measure import RunResult
 from .plan import CONTINUOUS, EXPERIMENTS
 
@@ -39,60 +38,6 @@ OUR_TARGET = 3.10
 CONT_TARGETS = {"phys_cont": 1.05, "phys_cont_flee": 0.80, "phys_cont_collision": 1.10}
 """Issue 13: greedy capture time ÷ pursuit's, at most (random evader within 5%, fleeing
 evader at least 20% faster, with collisions within 10% and fewer collisions)."""
-
-
-@dataclass
-class Data:
-    """What the claims are measured on."""
-
-    by_cell: dict[tuple[str, str, str], list[RunResult]]
-    references: dict[str, dict[str, Any] | None]
-    pursuit: dict[str, dict[str, Any]] = field(default_factory=dict)
-    exploit: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
-    oracle_worst_case: dict[str, Any] | None = None
-    minimax: dict[str, Any] | None = None
-    crossplay: list[dict[str, Any]] = field(default_factory=list)
-    modes: list[str] = field(default_factory=list)
-    groups: list[str] = field(default_factory=list)
-
-    def runs(self, group: str, scenario: str, algo: str) -> list[RunResult]:
-        """The finished runs of a cell."""
-        return self.by_cell.get((group, scenario, algo), [])
-
-
-@dataclass
-class Claim:
-    """One row of the claims table."""
-
-    who: str  # "paper" or "ours"
-    claim: str
-    scope: str
-    measured: str
-    interval: str
-    verdict: str
-    test: str
-    anchor: str = ""
-
-
-def fmt(x: float, digits: int = 3) -> str:
-    """A number to ``digits`` significant digits, thousands separated; ``—`` if not finite."""
-    if x is None or not np.isfinite(x):
-        return "—"
-    if abs(x) >= 10**digits:
-        return f"{x:,.0f}"
-    return f"{x:.{digits}g}"
-
-
-def ci_text(interval: Interval, digits: int = 3) -> str:
-    """``[lo, hi]`` or ``—``."""
-    _, lo, hi = interval
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        return "— (one seed)"
-    return f"[{fmt(lo, digits)}, {fmt(hi, digits)}]"
-
-
-def _p(p: float) -> str:
-    return "p = —" if not np.isfinite(p) else f"p = {p:.3g}"
 
 
 PRESET_NAME = {"paper": "paper's method", "ours": "our defaults"}
@@ -138,8 +83,9 @@ def _more_episodes(data: Data, group: str, mode: str, exp: int) -> Claim | None:
         f"{fmt(np.mean(x), 4)} vs {fmt(np.mean(y), 4)} episodes ({fmt(ratio[0])}×)",
         ci_text(ratio),
         verdict_test(p_more, p_less),
-        f"Welch t, one-sided, {_p(p_more)}; CI: bootstrap ratio",
+        f"Welch t, one-sided, {p_text(p_more)}; CI: bootstrap ratio",
         f"#{group}-{mode}",
+        (len(x), len(y)),
     )
 
 
@@ -158,6 +104,7 @@ def _settles_near_six(data: Data, group: str, mode: str) -> Claim | None:
         verdict_bound(late, at_least=NEAR[0], at_most=NEAR[1]),
         f"t interval within [{NEAR[0]:g}, {NEAR[1]:g}]",
         f"#{group}-{mode}",
+        (len(a2cm),),
     )
 
 
@@ -177,8 +124,9 @@ def _shorter_with_collisions(data: Data, group: str, mode: str, exp: int) -> Cla
         f"{fmt(np.mean(x))} vs {fmt(np.mean(y))} steps, last 10% ({fmt(ratio[0])}×)",
         ci_text(ratio),
         verdict_test(p_less, p_more),
-        f"Welch t, one-sided, {_p(p_less)}; CI: bootstrap ratio",
+        f"Welch t, one-sided, {p_text(p_less)}; CI: bootstrap ratio",
         f"#{group}-{mode}",
+        (len(x), len(y)),
     )
 
 
@@ -200,6 +148,7 @@ def _same_wall_time(data: Data, group: str, mode: str) -> Claim | None:
         verdict_bound(ratio, at_least=TIME_BAND[0], at_most=TIME_BAND[1]),
         f"bootstrap ratio CI within [{TIME_BAND[0]}, {TIME_BAND[1]}]",
         f"#{group}-{mode}",
+        (len(a2cm_t), len(a2c_t)),
     )
 
 
@@ -223,8 +172,8 @@ def our_claims(data: Data) -> list[Claim]:
         found += [_ours_faster(data, mode) for mode in data.modes]
     if "continuous" in data.groups:
         found += [_continuous_target(data, s, a) for s in CONTINUOUS for a in ("a2cm", "a2c")]
-    if "selfplay" in data.groups and data.oracle_worst_case:
-        found += [_less_exploitable(data, algo, f) for algo, f in data.exploit.items()]
+    if data.oracle_worst_case:
+        found += [_less_exploitable(data, key, f) for key, f in data.exploit.items()]
     return [c for c in found if c is not None] + _evader_claims(data)
 
 
@@ -245,6 +194,7 @@ def _collision_target(data: Data, exp: int, algo: str) -> Claim | None:
         verdict_bound(steps, at_most=OUR_TARGET),
         "t interval ≤ target",
         "#ours-grid",
+        (len(runs),),
     )
 
 
@@ -276,8 +226,9 @@ def _ours_faster(data: Data, mode: str) -> Claim | None:
         f"P(ours better) = {fmt(poi[0])}",
         ci_text(poi),
         verdict,
-        "probability of improvement, stratified bootstrap CI vs 0.5",
+        "probability of improvement, stratified bootstrap CI vs 0.5 (n: seeds per cell)",
         f"#aggregate-{mode}",
+        (min(len(x) for x in xs), min(len(y) for y in ys)),
     )
 
 
@@ -320,11 +271,13 @@ def _continuous_target(data: Data, scenario: str, algo: str) -> Claim | None:
         verdict,
         test,
         "#continuous",
+        (len(runs),),
     )
 
 
-def _less_exploitable(data: Data, algo: str, figures: list[dict[str, Any]]) -> Claim | None:
-    """Issue 14: self-play pursuers' worst-case capture time below the oracle's."""
+def _less_exploitable(data: Data, key: str, figures: list[dict[str, Any]]) -> Claim | None:
+    """Issue 14: self-play pursuers' worst-case capture time (``key``: ``group/algo``)
+    below the oracle's."""
     oracle = float(data.oracle_worst_case["exploit_worst_case"])
     values = [f["exploit_worst_case"] for f in figures if f]
     if not values:
@@ -337,16 +290,18 @@ def _less_exploitable(data: Data, algo: str, figures: list[dict[str, Any]]) -> C
         test += f"; horizon truncated to {figures[0]['horizon']} steps (a lower bound)"
         if verdict == HOLDS:
             verdict = UNSURE
+    group = key.split("/")[0]
     return Claim(
         "ours",
-        f"Self-play {algo.upper()} pursuers are less exploitable than the oracle "
+        f"{team_name(key)} pursuers are less exploitable than the oracle "
         "optimal against random (worst-case capture time)",
-        "grid_vs",
+        "grid_vs" if group == "selfplay" else "grid_vs, --preset descent",
         f"{fmt(wc[0])} vs {fmt(oracle)} steps",
         ci_text(wc),
         verdict,
         test,
-        "#selfplay",
+        f"#{group}",
+        (len(values),),
     )
 
 
@@ -359,7 +314,7 @@ def _evader_claims(data: Data) -> list[Claim]:
     best = max(float(np.mean([x["length"] for x in rows])) for rows in scripted if rows)
     out = []
     for (pursuers, evader), rows in by.items():
-        if pursuers != "oracle" or not evader.endswith("self-play evader"):
+        if pursuers != "oracle" or evader in ("random", "flee"):
             continue
         lengths = mean_interval([x["length"] for x in rows])
         out.append(
@@ -371,22 +326,8 @@ def _evader_claims(data: Data) -> list[Claim]:
                 ci_text(lengths),
                 verdict_bound(lengths, at_least=best),
                 "t interval over seeds > the scripted evaders' (sampled play)",
-                "#selfplay",
+                "#descent" if "descent" in evader else "#selfplay",
+                (len(rows),),
             )
         )
     return out
-
-
-def claims_table(claims: list[Claim]) -> list[str]:
-    """The claims as Markdown rows."""
-    lines = [
-        "| who | claim | scope | measured | 95% CI | verdict | test |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for c in claims:
-        scope = f"[{c.scope}]({c.anchor})" if c.anchor else c.scope
-        lines.append(
-            f"| {c.who} | {c.claim} | {scope} | {c.measured} | {c.interval} | "
-            f"**{c.verdict}** | {c.test} |"
-        )
-    return lines

@@ -10,9 +10,10 @@ from typing import Any
 import numpy as np
 
 from ...analysis.stats import iqm_interval, mean_interval
-from .claims import PAPER, Claim, Data, ci_text, claims_table, fmt, score
+from .claim import Claim, Data, ci_text, claims_table, fmt
+from .claims import PAPER, score
 from .measure import RunResult
-from .plan import CONTINUOUS, EXPERIMENTS, GROUP_TITLES, PlannedRun
+from .plan import CONTINUOUS, EXPERIMENTS, GROUP_TITLES, SELF_PLAY_GROUPS, PlannedRun
 
 
 def _ci(values: list[float], digits: int = 3, ceiling: float | None = None) -> str:
@@ -172,15 +173,22 @@ def _minimax_text(bounds: dict[str, Any] | None, oracle: dict[str, Any] | None) 
     )
 
 
-def selfplay_section(
-    data: Data, out: Path, figures: dict[str, Path], crossplay: list[dict[str, Any]]
-) -> list[str]:
-    """The self-play runs, their exact exploitability and the cross-play table."""
+SELF_PLAY_TEXT = {
+    "selfplay": "Pursuers (A2C or A2CM) and an A2C evader learn together on `grid_vs`.",
+    "descent": "Pursuers (A2C or A2CM) and an A2C evader learn together on `grid_vs`, both "
+    "by exploitability descent (`--preset descent`: every few updates each team steps "
+    "towards beating the other's exact best response).",
+}
+
+
+def selfplay_section(data: Data, out: Path, figures: dict[str, Path], group: str) -> list[str]:
+    """A self-play group's runs and their exact exploitability, beside the game's value
+    bracket."""
     lines = [
-        '<a id="selfplay"></a>',
-        f"## {GROUP_TITLES['selfplay']}",
+        f'<a id="{group}"></a>',
+        f"## {GROUP_TITLES[group]}",
         "",
-        "Pursuers (A2C or A2CM) and an A2C evader learn together on `grid_vs`. *Worst case*: "
+        SELF_PLAY_TEXT[group] + " *Worst case*: "
         "the value of the evader's exact best response to the final pursuers, E[min(capture "
         "time, horizon)]; *pursuers' BR*: the exact best response of a pursuer team to the "
         "final learned evader. The oracle optimal against the random evader has worst case "
@@ -192,8 +200,8 @@ def selfplay_section(
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for algo in ("a2c", "a2cm"):
-        runs = data.runs("selfplay", "grid_vs", algo)
-        figures_ = {f.get("seed"): f for f in data.exploit.get(algo, []) if f}
+        runs = data.runs(group, "grid_vs", algo)
+        figures_ = {f.get("seed"): f for f in data.exploit.get(f"{group}/{algo}", []) if f}
         for r in sorted(runs, key=lambda r: r.seed):
             e = figures_.get(r.seed, {})
             horizon = e.get("horizon")
@@ -207,32 +215,39 @@ def selfplay_section(
                 f"{fmt(e.get('exploit_pursuers_br', np.nan), 4)} | {h_text} | "
                 f"{fmt(e.get('seconds', np.nan))} | {links([r], out)} |"
             )
-    if crossplay:
-        evaders = list(dict.fromkeys(row["evader"] for row in crossplay))
-        lines += [
-            "",
-            "**Cross-play** (sampled policies; mean episode length, capped at max_steps, and "
-            "capture rate; learned pursuers and evaders of the same seed index are paired):",
-            "",
-            "| pursuers | " + " | ".join(f"evader: {e}" for e in evaders) + " |",
-            "|---|" + "---|" * len(evaders),
-        ]
-        by = {(row["pursuers"], row["evader"]): row for row in crossplay}
-        for p in dict.fromkeys(row["pursuers"] for row in crossplay):
-            cells = []
-            for e in evaders:
-                row = by.get((p, e))
-                if not row or not row["results"]:
-                    cells.append("—")
-                    continue
-                length = _ci([x["length"] for x in row["results"]])
-                rate = np.mean([x["capture_rate"] for x in row["results"]])
-                cells.append(f"{length}, {100 * rate:.0f}% caught")
-            lines.append(f"| {p} | " + " | ".join(cells) + " |")
-    path = figures.get("selfplay/grid/lengths")
+    path = figures.get(f"{group}/grid/lengths")
     if path:
         rel = Path(os.path.relpath(path.resolve(), out.resolve())).as_posix()
-        lines += ["", f"![self-play lengths]({rel})"]
+        lines += ["", f"![{group} lengths]({rel})"]
+    return [*lines, ""]
+
+
+def crossplay_section(crossplay: list[dict[str, Any]]) -> list[str]:
+    """Every pursuer team against every evader on ``grid_vs`` (the self-play groups' teams
+    on both sides, the oracle, minimax and our A2CM trained against the random evader)."""
+    if not crossplay:
+        return []
+    evaders = list(dict.fromkeys(row["evader"] for row in crossplay))
+    lines = [
+        "**Cross-play** (`grid_vs`; sampled policies; mean episode length, capped at "
+        "max_steps, and capture rate; learned pursuers and evaders of the same seed index "
+        "are paired):",
+        "",
+        "| pursuers | " + " | ".join(f"evader: {e}" for e in evaders) + " |",
+        "|---|" + "---|" * len(evaders),
+    ]
+    by = {(row["pursuers"], row["evader"]): row for row in crossplay}
+    for p in dict.fromkeys(row["pursuers"] for row in crossplay):
+        cells = []
+        for e in evaders:
+            row = by.get((p, e))
+            if not row or not row["results"]:
+                cells.append("—")
+                continue
+            length = _ci([x["length"] for x in row["results"]])
+            rate = np.mean([x["capture_rate"] for x in row["results"]])
+            cells.append(f"{length}, {100 * rate:.0f}% caught")
+        lines.append(f"| {p} | " + " | ".join(cells) + " |")
     return [*lines, ""]
 
 
@@ -301,7 +316,8 @@ def report(
         "oracle driven in physics (discrete control) or `pursuit` (continuous control), "
         "played greedy on the same episodes. Verdicts: *holds* when the test supports the "
         "claim at the 5% level (or its 95% interval lies on the claimed side), *does not "
-        "hold* when it supports the opposite, else *inconclusive*.",
+        "hold* when it supports the opposite, else *inconclusive*; each names its sample sizes "
+        "(*n*, seeds per side), and one seed a side decides nothing: *inconclusive (n = 1)*.",
         "",
         "## Claims",
         "",
@@ -314,7 +330,9 @@ def report(
     lines += aggregate_section(data)
     if "continuous" in data.groups:
         lines += continuous_section(data, out, figures)
-    if "selfplay" in data.groups:
-        lines += selfplay_section(data, out, figures, crossplay)
+    for group in SELF_PLAY_GROUPS:
+        if group in data.groups:
+            lines += selfplay_section(data, out, figures, group)
+    lines += crossplay_section(crossplay)
     lines += wall_section(data, missing, meta)
     return "\n".join(lines) + "\n"

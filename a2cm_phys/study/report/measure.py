@@ -4,12 +4,18 @@ Greedy evaluations, references and exact exploitability take seconds to minutes,
 is cached as JSON: a run's beside it (``report_eval.json``, ``report_exploit.json``), the
 references and the cross-play table in the log folder (``report_cache.json``), keyed by
 everything they depend on; re-running the report recomputes nothing that is there.
+
+A run's figures come from its learning curve thinned to a few hundred points, cached with
+its training tallies: once measured, a finished run is reported from these small files
+alone (its log and checkpoints may be left out of a copy of the report's runs, which is
+how the report's runs outlive the machine that trained them).
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import hashlib
 import json
 import time
 from dataclasses import dataclass, field
@@ -59,6 +65,7 @@ class RunResult:
     wall_time: float
     greedy: dict[str, float] = field(default_factory=dict)
     greedy_lengths: list[int] = field(default_factory=list)
+    curve: dict[str, list[float]] | None = None  # thinned (run_series.thinned); None: empty
 
     @property
     def seed(self) -> int:
@@ -84,6 +91,18 @@ def training_figures(run_dir: Path) -> dict[str, float]:
         "late_return": float(returns[late].mean()) if late.any() else float("nan"),
         "collisions_per_episode": float(collisions.mean()) if len(collisions) else float("nan"),
     }
+
+
+def training_curve(run_dir: Path) -> dict[str, list[float]] | None:
+    """The run's learning curve, thinned (:func:`~a2cm_phys.analysis.run_series.thinned`);
+    ``None`` if its log holds no finished episode (a tiny budget) or cannot be read whole."""
+    from ...analysis.run_series import load_logged_run, thinned
+    from ...record.runlog import LogError
+
+    try:
+        return thinned(load_logged_run(run_dir))
+    except LogError:
+        return None
 
 
 def greedy_eval(run_dir: Path, episodes: int, scenario: Scenario | None = None) -> dict[str, Any]:
@@ -125,6 +144,9 @@ def measure(run: PlannedRun, summary: dict[str, Any], eval_episodes: int) -> Run
         f"greedy-{stamp}-{eval_episodes}",
         lambda: greedy_eval(run_dir, eval_episodes),
     )
+    curve = _cached(
+        run_dir / "report_eval.json", f"curve-{stamp}", lambda: training_curve(run_dir)
+    )
     lengths = greedy.pop("lengths", [])
     return RunResult(
         run=run,
@@ -136,6 +158,7 @@ def measure(run: PlannedRun, summary: dict[str, Any], eval_episodes: int) -> Run
         wall_time=float(summary.get("wall_time_s", float("nan"))),
         greedy={k: (float("nan") if v is None else v) for k, v in greedy.items()},
         greedy_lengths=lengths,
+        curve=curve,
     )
 
 
@@ -233,12 +256,17 @@ def minimax_bounds(scenario_name: str, horizon: int | None, cache: Path) -> dict
 
 
 def _stamped(pair: tuple[str, str]) -> list[str]:
-    """A pairing's cache identity: each run directory with its checkpoint's modification
-    time, so that a run trained again in the same directory is measured again."""
+    """A pairing's cache identity: each run directory with a digest of its checkpoint, so
+    that a run trained again in the same directory is measured again, and a copy of the
+    same run (a clone of the report's runs: new modification times) is not."""
     out = []
     for spec in pair:
         checkpoint = Path(spec) / "checkpoint.pt"
-        out.append(f"{spec}@{checkpoint.stat().st_mtime_ns}" if checkpoint.exists() else spec)
+        if checkpoint.exists():
+            digest = hashlib.sha256(checkpoint.read_bytes()).hexdigest()[:16]
+            out.append(f"{spec}@{digest}")
+        else:
+            out.append(spec)
     return out
 
 

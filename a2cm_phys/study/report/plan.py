@@ -22,14 +22,18 @@ from ..rundirs import check_reusable, execute, existing_runs, find_run, run_stat
 from ..runspec import RunSpec
 from ..watch import RunsProgress
 
-GROUPS = ("paper", "ours", "continuous", "selfplay")
+GROUPS = ("paper", "ours", "continuous", "selfplay", "descent")
 """The groups of cells, in report order."""
+
+SELF_PLAY_GROUPS = ("selfplay", "descent")
+"""The groups whose evader learns (grid self-play): exact exploitability, cross-play."""
 
 GROUP_TITLES = {
     "paper": "The paper's experiments, its exact method (`--preset paper`)",
     "ours": "The paper's experiments, our defaults",
     "continuous": "Continuous control",
     "selfplay": "The learning evader (grid self-play)",
+    "descent": "Grid self-play by exploitability descent (`--preset descent`)",
 }
 
 EXPERIMENTS: dict[int, tuple[str, dict[str, str]]] = {
@@ -103,12 +107,12 @@ def cells(groups: list[str], modes: list[str]) -> list[Cell]:
                         out.append(Cell(group, scenarios[mode], algo, mode, exp))
         elif group == "continuous":
             out += [Cell(group, s, a, "physics") for s in CONTINUOUS for a in ALGOS]
-        elif group == "selfplay":
+        elif group in SELF_PLAY_GROUPS:
             out += [Cell(group, s, a, "grid") for s in SELFPLAY for a in ALGOS]
     return out
 
 
-GROUP_PRESETS = {"paper": "paper"}
+GROUP_PRESETS = {"paper": "paper", "descent": "descent"}
 """The preset a group's runs start from (the others: our defaults)."""
 
 
@@ -235,10 +239,31 @@ def estimate_seconds(
         seconds += est.per_update * cfg.updates
     sps = est.steps_per_s or 1000.0
     seconds += eval_episodes * EVAL_LENGTH[scenario.control] / sps
-    if run.cell.group == "selfplay" and exploit_steps != 0:
+    if run.cell.group in SELF_PLAY_GROUPS and exploit_steps != 0:
         horizon = exploit_steps or scenario.max_steps
         seconds += EXPLOIT_FULL_S * min(horizon, scenario.max_steps) / 1000.0
     return seconds
+
+
+def budgets(runs: list[PlannedRun]) -> str:
+    """Each group's training budget as its runs resolve it (scenarios sharing one are
+    named together): ``paper: 5,000 updates of 128 steps (grid, phys, …); …``."""
+    by_group: dict[str, dict[tuple[int, int], list[str]]] = {}
+    for run in runs:
+        _, cfg = run.spec.resolve()
+        names = by_group.setdefault(run.cell.group, {}).setdefault(
+            (cfg.updates, cfg.batch_size), []
+        )
+        if run.cell.scenario not in names:
+            names.append(run.cell.scenario)
+    parts = []
+    for group, shapes in by_group.items():
+        each = [
+            f"{updates:,} updates of {batch:,} steps ({', '.join(names)})"
+            for (updates, batch), names in shapes.items()
+        ]
+        parts.append(f"{group}: {'; '.join(each)}")
+    return ". ".join(parts) + "." if parts else ""
 
 
 def check_groups(text: str) -> list[str]:
