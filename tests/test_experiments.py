@@ -114,6 +114,26 @@ def test_report_end_to_end_on_tiny_budgets(
     assert "`ours/grid-a2c-s0`: not run" in text
 
 
+def test_an_interrupted_session_still_counts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Ctrl-C while training: exit 130, and the session's time is in the log folder's
+    record, so that the report's total over sessions (which may be many) adds up."""
+
+    def interrupted(*args: object) -> bool:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(experiments, "_train", interrupted)
+    logdir = tmp_path / "runs"
+    argv = [*TINY, "--groups", "ours", "--logdir", str(logdir), "--out", str(tmp_path / "d")]
+    assert experiments.main(argv) == 130
+    assert "interrupted: finished runs are kept" in capsys.readouterr().err
+    sessions = json.loads((logdir / "report_sessions.json").read_text())
+    assert len(sessions) == 1 and sessions[0]["elapsed_s"] > 0
+    assert "--groups ours" in sessions[0]["command"]
+    assert not (tmp_path / "d" / "RESULTS.md").exists()
+
+
 @pytest.mark.parametrize(
     ("argv", "words"),
     [

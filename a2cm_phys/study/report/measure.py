@@ -44,7 +44,7 @@ def _cached(path: Path, key: str, compute: Any) -> Any:
     value = compute()
     data[key] = value
     with contextlib.suppress(OSError):
-        path.write_text(json.dumps(data, indent=1) + "\n")
+        path.write_text(json.dumps(data, separators=(",", ":")) + "\n")  # kept in git: compact
     return value
 
 
