@@ -174,7 +174,7 @@ def build_report(
     by_cell, missing = collect(runs, errors, args.eval_episodes)
     data = Data(by_cell, {}, modes=modes, groups=groups)
     add_references(data, runs, args.eval_episodes, cache)
-    crossplay = add_self_play(data, args, cache)
+    crossplay = add_self_play(data, args, cache) if set(SELF_PLAY_GROUPS) & set(groups) else []
     figures = _figures(data, out, groups, modes)
     claims = paper_claims(data) + our_claims(data)
     elapsed, sessions = record_session(logdir, meta, start)

@@ -64,7 +64,6 @@ class RunResult:
     collisions_per_episode: float  # in training
     wall_time: float
     greedy: dict[str, float] = field(default_factory=dict)
-    greedy_lengths: list[int] = field(default_factory=list)
     curve: dict[str, list[float]] | None = None  # thinned (run_series.thinned); None: empty
 
     @property
@@ -139,15 +138,15 @@ def measure(run: PlannedRun, summary: dict[str, Any], eval_episodes: int) -> Run
     train = _cached(
         run_dir / "report_eval.json", f"train-{stamp}", lambda: training_figures(run_dir)
     )
-    greedy = _cached(
+    greedy = _cached(  # the figures, not each episode's length (the cache is kept in git)
         run_dir / "report_eval.json",
         f"greedy-{stamp}-{eval_episodes}",
-        lambda: greedy_eval(run_dir, eval_episodes),
+        lambda: {k: v for k, v in greedy_eval(run_dir, eval_episodes).items() if k != "lengths"},
     )
     curve = _cached(
         run_dir / "report_eval.json", f"curve-{stamp}", lambda: training_curve(run_dir)
     )
-    lengths = greedy.pop("lengths", [])
+    greedy.pop("lengths", None)  # caches written before kept them
     return RunResult(
         run=run,
         episodes=int(train["episodes"]),
@@ -157,7 +156,6 @@ def measure(run: PlannedRun, summary: dict[str, Any], eval_episodes: int) -> Run
         collisions_per_episode=float(train["collisions_per_episode"]),
         wall_time=float(summary.get("wall_time_s", float("nan"))),
         greedy={k: (float("nan") if v is None else v) for k, v in greedy.items()},
-        greedy_lengths=lengths,
         curve=curve,
     )
 
