@@ -101,7 +101,8 @@ half the time"):
   17.652 (worst 17.926, 1.011× ``pursuit``); 64 of 512 at 7e-3 17.967 (worst 18.424,
   1.056×); at 1e-2 17.836 (worst 17.869, 1.022×), in 0.54× the training time.
   ``phys_cont_collision`` (``pursuit`` 17.416): 18.567 before (worst 19.402, 1.066×;
-  collisions 0.0006 a game), 17.782 with these (worst 18.282, 1.021×; collisions 0).
+  collisions 0.0006 a game), 17.782 with these (worst 18.282, 1.021×; collisions 0, the
+  worst seed 0.0002).
 - Against the fleeing evader they were far worse (``grid_flee``: A2CM 11.9 steps, A2C 8.0,
   against 6.1 and 5.5 with 16 of 128), so it keeps 16 games of 128 (and continuous control
   its :data:`FLEE_DEFAULTS`), as do a learned evader (self-play) and discrete physics."""
