@@ -96,8 +96,8 @@ def _add_train_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--num-envs",
         type=_COUNT,
-        help="parallel games (default: 16; grid against the random evader: 64; --preset"
-        " paper: 1, the paper's setting)",
+        help="parallel games (default: 16; against the random evader, grid or continuous"
+        " control: 64; --preset paper: 1, the paper's setting)",
     )
     p.add_argument(
         "--updates",
@@ -109,14 +109,15 @@ def _add_train_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--batch-size",
         type=_COUNT,
-        help="steps per update over all games (default: 128; grid against the random"
-        " evader, and continuous control against the fleeing evader: 512)",
+        help="steps per update over all games (default: 128; against the random evader, grid"
+        " or continuous control, and continuous control against the fleeing evader: 512)",
     )
     p.add_argument("--seed", type=SEED, help=f"the run's seed (default: {d.seed})")
     p.add_argument(
         "--lr",
         type=float,
-        help="learning rate (default: 0.007, the paper's; grid against the random evader: 0.01)",
+        help="learning rate (default: 0.007, the paper's; against the random evader, grid or"
+        " continuous control: 0.01)",
     )
     p.add_argument(
         "--reward-scale",

@@ -74,14 +74,14 @@ class EpisodeRows:
         eps = step.episodes
         if eps:
             buf.write_starts(r, self._vec)
-            games = eps.env.tolist()
-            ev: list[list | None] = [None] * len(games)
+            ev: list[list | None] = [None] * len(eps)
             if buf.vel is not None or out.events is not None or any(events):
-                for j, g in enumerate(games):
+                for j, g in enumerate(eps.env.tolist()):
                     if buf.vel is not None or events[g]:
                         ev[j], events[g] = events[g], []
-            whole = np.ones(len(games), dtype=bool)
-            if self._partial:
+            whole = np.ones(len(eps), dtype=bool)
+            if self._partial:  # a resumed run's first episodes
+                games = eps.env.tolist()
                 whole[:] = [g not in self._partial for g in games]
                 self._partial.difference_update(games)
             self._queue.append(Finished(eps, self._begin[eps.env], r, ev, whole))
