@@ -21,6 +21,7 @@ from a2cm_phys.analysis.stats import (
     welch_p,
 )
 from a2cm_phys.commands import experiments
+from a2cm_phys.study.report import build
 from a2cm_phys.study.report.claim import Claim, claims_table
 
 TINY = [
@@ -31,8 +32,25 @@ TINY = [
 ]  # fmt: skip
 
 
+@pytest.fixture(autouse=True)
+def quick_game_value(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """The game's value takes minutes and 3.5 GiB even at a short horizon (the solver is
+    tested in tests/test_nash.py): the report gets a stand-in, and its calls are kept."""
+    calls: list[int] = []
+
+    def bracket(scenario: str, horizon: int | None, cache: Path) -> dict:
+        calls.append(horizon)
+        return {"lower": 3.875, "upper": 4.125, "horizon": horizon}
+
+    monkeypatch.setattr(build, "game_value_bracket", bracket)
+    return calls
+
+
 def test_report_end_to_end_on_tiny_budgets(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    quick_game_value: list[int],
 ) -> None:
     out, logdir = tmp_path / "docs", tmp_path / "runs"
     argv = [*TINY, "--logdir", str(logdir), "--out", str(out)]
@@ -69,6 +87,11 @@ def test_report_end_to_end_on_tiny_budgets(
     # exact bounds from the minimax solver, truncated at the same 5 steps: [3, 5]
     assert "minimax capture time lies in [3, 5]" in text
     assert "| minimax | " in text  # the minimax team is a row of the cross-play table
+    assert "game's value lies in [3.875, 4.125] (horizon 5" in text and quick_game_value == [5]
+    # the later issues' targets: export parity measured on the runs, the rest from records
+    assert re.search(r"Actors exported to ONNX act as the trained ones.*\*\*holds\*\*", claims)
+    assert "Recurrent (gru) actors capture in at most 0.85×" in claims  # benchmarks/results
+    assert "## Later work" in text
     assert "a2cm_phys 0." in text and "Total wall time" in text
     assert "Every planned run finished." in text
     for name in re.findall(r"!\[[^]]*\]\((figures/[^)]+)\)", text):
@@ -105,6 +128,13 @@ def test_report_end_to_end_on_tiny_budgets(
     )
     assert all(f.stat().st_mtime_ns > t for f, t in figures.items())  # drawn again
     assert "could not be measured" not in again
+
+    # --quote-in rewrites another document's quotes of the headline figures
+    readme = tmp_path / "README.md"
+    readme.write_text("Greedy: <!-- results: main-job -->old<!-- /results -->.\n")
+    assert experiments.main([*argv, "--report-only", "--quote-in", str(readme)]) == 0
+    assert f"quotes rewritten: {readme}" in capsys.readouterr().out
+    assert "old" not in readme.read_text() and "steps (1 seed)" in readme.read_text()
 
     # a run that is missing is listed, not fatal
     (logdir / "ours" / "grid-a2c-s0" / "summary.json").unlink()

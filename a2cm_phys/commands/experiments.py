@@ -3,6 +3,7 @@
     python -m a2cm_phys.experiments [--groups paper,ours,continuous,selfplay,descent]
         [--seeds 0-4]
         [--dry-run] [--sequential] [--logdir logs/experiments] [--out docs]
+        [--quote-in README.md,BENCHMARKS.md]
 
 Groups of cells (scenario × algorithm × seed), each a sweep in ``<logdir>/<group>/``
 (:mod:`a2cm_phys.sweep`: Ray when installed, finished runs skipped, unfinished resumed):
@@ -25,7 +26,9 @@ Before training, one short timed run per cell type gives the wall-time estimate 
 opens with the claims table (measured figures, 95% CIs, verdicts and tests), then the
 tables (each row linking its runs), figures drawn by :mod:`a2cm_phys.plot` (x in
 environment steps, mean across seeds with a 95% band, the optimum or reference dashed),
-the per-cell and total wall time, and any run that could not be made.
+the per-cell and total wall time, and any run that could not be made. ``--quote-in``
+rewrites the headline figures other documents quote from it
+(:mod:`a2cm_phys.study.report.headline`).
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..config import ConfigError, load_train
 from ..study.report.build import build_report, record_session
+from ..study.report.headline import quote_in
 from ..study.report.plan import (
     ALGOS,
     EXPERIMENTS,
@@ -146,6 +150,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sequential", action="store_true", help="no Ray, even if installed")
     p.add_argument("--dry-run", action="store_true", help="list the runs and the estimate; stop")
     p.add_argument("--report-only", action="store_true", help="no training: report what exists")
+    p.add_argument(
+        "--bench-records",
+        default="benchmarks/results",
+        metavar="DIR",
+        help="the benchmarks' records (*.jsonl) the claims on partial observability, scale"
+        " and speed are tested on (none there: those claims are left out)",
+    )
+    p.add_argument(
+        "--quote-in",
+        default="",
+        metavar="FILES",
+        help="comma-separated documents (e.g. README.md,BENCHMARKS.md) whose quotes of the"
+        " report's headline figures (<!-- results: KEY -->…<!-- /results -->) are rewritten"
+        " from the new results.json",
+    )
     p.add_argument(
         "--estimate-updates",
         type=int_range(0),
@@ -274,6 +293,10 @@ def _main(argv: Sequence[str]) -> int:
     check_device(load_train(base).device)
     logdir = writable_dir(args.logdir, "--logdir")
     out = writable_dir(args.out, "--out")
+    quoting = [Path(name.strip()) for name in args.quote_in.split(",") if name.strip()]
+    for path in quoting:
+        if not path.is_file():
+            raise ConfigError(f"--quote-in: no file {path}")
     runs = plan(groups, modes, seeds, logdir, base, options)
     estimates = {}
     if args.estimate_updates and not args.report_only:
@@ -300,6 +323,8 @@ def _main(argv: Sequence[str]) -> int:
     meta = _meta(args, argv, use_ray, budgets(runs))
     missing = build_report(runs, errors, out, logdir, meta, start, args, groups, modes)
     print(f"report: {out / 'RESULTS.md'}")
+    for path in quote_in(quoting, out / "results.json"):
+        print(f"quotes rewritten: {path}")
     for run, why in missing:
         print(f"not in the report: {run.cell.group}/{run.run_dir.name}: {why}", file=sys.stderr)
     return 1 if errors else 0

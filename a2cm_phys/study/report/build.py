@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from ...base.versions import __version__
+from ...training.rundir import write_atomic
 from ..watch import RunsProgress
 from .claim import Claim, Data, team_name
 from .claims import our_claims, paper_claims
@@ -19,12 +20,15 @@ from .measure import (
     RunResult,
     cross_play,
     exploit,
+    export_parity,
+    game_value_bracket,
     measure,
     minimax_bounds,
     oracle_worst_case,
     reference,
 )
 from .plan import EXPERIMENTS, SELF_PLAY_GROUPS, PlannedRun
+from .work_claims import work_claims
 
 
 def session_totals(sessions: list[dict[str, Any]]) -> dict[str, Any]:
@@ -176,14 +180,17 @@ def build_report(
     add_references(data, runs, args.eval_episodes, cache)
     crossplay = add_self_play(data, args, cache) if set(SELF_PLAY_GROUPS) & set(groups) else []
     figures = _figures(data, out, groups, modes)
-    claims = paper_claims(data) + our_claims(data)
+    add_parity(data)
+    records = Path(args.bench_records) if args.bench_records else None
+    claims = paper_claims(data) + our_claims(data) + work_claims(records, data.parity)
     elapsed, sessions = record_session(logdir, meta, start)
     runs_measured = sum(len(v) for v in by_cell.values())
     meta = {**meta, "version": __version__, "runs": runs_measured, "elapsed": elapsed}
+    meta["bench_records"] = str(records) if records and records.is_dir() else None
     meta.update(session_totals(sessions))
-    (out / "RESULTS.md").write_text(report(data, claims, out, figures, crossplay, missing, meta))
+    write_atomic(out / "RESULTS.md", report(data, claims, out, figures, crossplay, missing, meta))
     results = results_json(data, claims, crossplay, missing, meta)
-    (out / "results.json").write_text(json.dumps(results, indent=1, default=str) + "\n")
+    write_atomic(out / "results.json", json.dumps(results, indent=1, default=str) + "\n")
     return missing
 
 
@@ -205,11 +212,36 @@ def add_references(data: Data, runs: list[PlannedRun], episodes: int, cache: Pat
             progress.finished(scenario)
 
 
+PARITY_GROUPS = ("ours", "continuous", *SELF_PLAY_GROUPS)
+"""The groups whose runs' exported actors are checked (the paper's method's too would
+repeat the same graphs)."""
+
+
+def add_parity(data: Data) -> None:
+    """Each run's export parity (:func:`~.measure.export_parity`) into ``data.parity`` by
+    ``group/scenario/algo``, for the runs that can be measured."""
+    todo = [
+        (key, r)
+        for key, results in data.by_cell.items()
+        if key[0] in PARITY_GROUPS
+        for r in results
+    ]
+    with RunsProgress("export parity", len(todo), out=sys.stderr) as progress:
+        for (group, scenario, algo), r in todo:
+            name = f"{group}/{r.run.run_dir.name}"
+            progress.started(name)
+            checked = export_parity(r.run)
+            if checked is not None:
+                data.parity.setdefault(f"{group}/{scenario}/{algo}", []).append(checked)
+            progress.finished(name)
+
+
 def add_self_play(data: Data, args: argparse.Namespace, cache: Path) -> list[dict[str, Any]]:
     """The self-play groups' exact measures into ``data`` (unless ``--no-exploit``): each
-    run's exploitability (``data.exploit``, by ``group/algo``), the oracle's worst case and
-    the minimax bounds (the game's value bracket); then the cross-play table (also
-    ``data.crossplay``), or ``[]`` with no learned side to play."""
+    run's exploitability (``data.exploit``, by ``group/algo``), the oracle's worst case,
+    the pure-strategy minimax bounds and the game's value (mixed strategies, bracketed);
+    then the cross-play table (also ``data.crossplay``), or ``[]`` with no learned side to
+    play."""
     sp = {
         f"{group}/{algo}": data.runs(group, "grid_vs", algo)
         for group in SELF_PLAY_GROUPS
@@ -219,13 +251,16 @@ def add_self_play(data: Data, args: argparse.Namespace, cache: Path) -> list[dic
     horizon = args.exploit_max_steps
     if any(sp.values()) and not args.no_exploit:
         runs = sum(len(results) for results in sp.values())
-        with RunsProgress("exact measures", 2 + runs, unit="solves", out=sys.stderr) as progress:
+        with RunsProgress("exact measures", 3 + runs, unit="solves", out=sys.stderr) as progress:
             progress.started("the oracle's worst case")
             data.oracle_worst_case = oracle_worst_case("grid_vs", horizon, cache)
             progress.finished("the oracle's worst case")
             progress.started("minimax")
             data.minimax = minimax_bounds("grid_vs", horizon, cache)
             progress.finished("minimax")
+            progress.started("the game's value")
+            data.game_value = game_value_bracket("grid_vs", horizon, cache)
+            progress.finished("the game's value")
             for key, results in sp.items():
                 data.exploit[key] = []
                 for r in results:
@@ -281,7 +316,7 @@ def record_session(
             "training": meta["parallel"],
         }
     )
-    sessions_path.write_text(json.dumps(sessions, indent=1) + "\n")
+    write_atomic(sessions_path, json.dumps(sessions, indent=1) + "\n")
     return elapsed, sessions
 
 
@@ -322,6 +357,8 @@ def results_json(
         "exploit": data.exploit,
         "oracle_worst_case": data.oracle_worst_case,
         "minimax": data.minimax,
+        "game_value": data.game_value,
+        "parity": data.parity,
         "crossplay": crossplay,
         "missing": [{"run": f"{r.cell.group}/{r.run_dir.name}", "why": w} for r, w in missing],
     }

@@ -22,6 +22,8 @@ class Data:
     exploit: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     oracle_worst_case: dict[str, Any] | None = None
     minimax: dict[str, Any] | None = None
+    game_value: dict[str, Any] | None = None
+    parity: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     crossplay: list[dict[str, Any]] = field(default_factory=list)
     modes: list[str] = field(default_factory=list)
     groups: list[str] = field(default_factory=list)

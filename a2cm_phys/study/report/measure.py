@@ -16,7 +16,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import hashlib
+import importlib.util
 import json
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from ...config import Scenario, load_scenario
+from ...training.rundir import write_atomic
 from .plan import PlannedRun
 
 EVAL_SEED = 10_000
@@ -44,7 +47,7 @@ def _cached(path: Path, key: str, compute: Any) -> Any:
     value = compute()
     data[key] = value
     with contextlib.suppress(OSError):
-        path.write_text(json.dumps(data, separators=(",", ":")) + "\n")  # kept in git: compact
+        write_atomic(path, json.dumps(data, separators=(",", ":")) + "\n")  # kept in git: compact
     return value
 
 
@@ -160,6 +163,41 @@ def measure(run: PlannedRun, summary: dict[str, Any], eval_episodes: int) -> Run
     )
 
 
+PARITY_OBSERVATIONS = 10_000
+"""Observations each exported run is checked on (issue 34's figure)."""
+
+
+def export_parity(run: PlannedRun, observations: int = PARITY_OBSERVATIONS) -> dict | None:
+    """The run's actors exported to ONNX (into a temporary folder) against its own on
+    ``observations`` observations (:class:`~a2cm_phys.training.export.parity.Parity`'s
+    figures), cached beside the run; ``None`` where it cannot be measured: no checkpoint
+    (a copy of the report's runs keeps few) and nothing cached, or onnx not installed."""
+    path = run.run_dir / "report_eval.json"
+    key = f"parity-{observations}"
+    try:
+        cached = json.loads(path.read_text()) if path.exists() else {}
+    except (OSError, ValueError):
+        cached = {}
+    if key in cached:
+        return cached[key]
+    ready = all(importlib.util.find_spec(m) for m in ("onnx", "onnxruntime"))
+    if not ready or not (run.run_dir / "checkpoint.pt").exists():
+        return None
+
+    def compute() -> dict[str, Any]:
+        from ...deploy.spec import DeployError
+        from ...training.export import export_run
+
+        with tempfile.TemporaryDirectory() as folder:
+            try:
+                done = export_run(run.run_dir, Path(folder) / "team", check=observations)
+            except DeployError as err:  # the exported actors differ: a finding, kept
+                return {"observations": observations, "error": str(err)}
+        return dataclasses.asdict(done.parity)
+
+    return _cached(path, key, compute)
+
+
 # --------------------------------------------------------------------------- references
 
 
@@ -249,6 +287,23 @@ def minimax_bounds(scenario_name: str, horizon: int | None, cache: Path) -> dict
 
         bounds = solve(twin)
         return {"lower": bounds.lower_from_start, "upper": bounds.upper_from_start, "horizon": h}
+
+    return _cached(cache, key, compute)
+
+
+def game_value_bracket(scenario_name: str, horizon: int | None, cache: Path) -> dict[str, Any]:
+    """The game's value with mixed strategies, bracketed by the equilibrium evader's and the
+    equilibrium team's exact worst cases (:func:`a2cm_phys.solve.nash.game_value`, as
+    ``oracle --game-value``): ``{"lower", "upper", "horizon"}``. Minutes and a few GiB the
+    first time; then from the report's cache (and the oracle's)."""
+    twin, h, _ = _grid_game(scenario_name, horizon)
+    key = json.dumps(["game-value", scenario_name, h])
+
+    def compute() -> dict[str, Any]:
+        from ...solve.cache import load_or_solve_value
+
+        value = load_or_solve_value(twin, progress=True)
+        return {"lower": value.lower, "upper": value.upper, "horizon": h}
 
     return _cached(cache, key, compute)
 

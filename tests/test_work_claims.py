@@ -1,0 +1,93 @@
+"""The report's claims on the later issues' work: each target tested on the benchmarks'
+records (or the report's own export checks), a missed target given its row and verdict."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from a2cm_phys.study.report.work_claims import (
+    oracle_claims,
+    parity_claims,
+    recurrent_claims,
+    scale_claims,
+    speed_claims,
+    work_claims,
+)
+
+
+def pomdp_rows(memoryless: list[float], recurrent: list[float]) -> list[dict]:
+    rows = [{"scenario": "grid_pomdp", "algo": "a2cm", "recurrent": "none", "mean_steps": x}
+            for x in memoryless]  # fmt: skip
+    rows += [{"scenario": "grid_pomdp", "algo": "a2cm", "recurrent": "gru", "mean_steps": x}
+             for x in recurrent]  # fmt: skip
+    return rows
+
+
+def test_recurrent_target_verdicts() -> None:
+    (missed,) = recurrent_claims(pomdp_rows([3.0, 3.1, 3.05], [3.02, 3.08, 3.1]))
+    assert missed.verdict == "does not hold" and missed.sizes == (3, 3)
+    assert "(1.00" in missed.measured and missed.scope == "grid_pomdp, A2CM"
+    (met,) = recurrent_claims(pomdp_rows([4.0, 4.1, 4.05], [3.0, 3.05, 3.1]))
+    assert met.verdict == "holds"
+    (one,) = recurrent_claims(pomdp_rows([4.0], [3.0]))
+    assert one.verdict == "inconclusive" and one.evidence == "n = 1"
+    assert recurrent_claims(pomdp_rows([], [3.0])) == []  # nothing to compare with
+
+
+def scale_row(config: str, seed: int, steps: float, reference: float, policy: str) -> dict:
+    return {"config": config, "seed": seed, "cap": 5_000_000, "scenario": config[:-3],
+            "size": 10, "pursuers": 3, "reference": reference, "reference_policy": policy,
+            "last_mean_steps": steps}  # fmt: skip
+
+
+def test_scale_targets_against_their_reference() -> None:
+    rows = [scale_row("grid10x3", s, x, 8.0, "optimum") for s, x in enumerate((8.3, 8.4, 8.2))]
+    rows += [scale_row("phys_cont10x3", s, x, 50.0, "pursuit") for s, x in
+             enumerate((118.0, 140.0, 190.0))]  # fmt: skip
+    grid, phys = scale_claims(rows)
+    assert grid.verdict == "holds" and "the exact optimum" in grid.claim
+    assert phys.verdict == "does not hold" and "`pursuit`" in phys.claim
+    assert phys.sizes == (3,)
+
+
+def test_oracle_scale_is_exact() -> None:
+    row = {"scenario": "grid", "size": 10, "pursuers": 3, "capture_steps": 8.0371,
+           "peak_gib": 0.7, "seconds": 197.0}  # fmt: skip
+    (claim,) = oracle_claims([{**row, "size": 9}, row])
+    assert claim.verdict == "holds" and "10×10: 8.0371" in claim.measured
+    (claim,) = oracle_claims([{**row, "size": 9}])
+    assert claim.verdict == "does not hold"  # the largest arena asked was never solved
+    (claim,) = oracle_claims([{**row, "peak_gib": 9.5}])
+    assert claim.verdict == "does not hold"
+    assert oracle_claims([]) == []
+
+
+def test_speed_target_from_recorded_pairs() -> None:
+    rows = [{"scenario": "grid_collision", "peer": "61cf8cf",
+             "pairs": [[10.0, 18.0], [10.5, 18.4], [12.0, 21.2], [10.6, 18.1]]}]  # fmt: skip
+    (claim,) = speed_claims(rows)
+    assert claim.verdict == "does not hold" and claim.sizes == (4,)  # every pair above 0.5
+    rows[0]["pairs"] = [[8.0, 18.0], [8.2, 18.4], [9.0, 21.2]]
+    assert speed_claims(rows)[0].verdict == "holds"
+
+
+def test_parity_rows() -> None:
+    good = {"observations": 10_000, "max_abs_diff": 1e-6, "max_scaled_diff": 1e-6,
+            "agreement": 1.0}  # fmt: skip
+    (claim,) = parity_claims({"ours/grid/a2cm": [good, good]})
+    assert claim.verdict == "holds"
+    assert "2 runs: greedy actions agree 100.00% of 20,000" in claim.measured
+    refused = {"observations": 10_000, "error": "the exported actors differ"}
+    (claim,) = parity_claims({"ours/grid/a2cm": [good, refused]})
+    assert claim.verdict == "does not hold" and "1 of 2 exports refused" in claim.measured
+    off = {**good, "agreement": 0.9999}
+    assert parity_claims({"ours/grid/a2cm": [good, off]})[0].verdict == "does not hold"
+
+
+def test_records_folder(tmp_path: Path) -> None:
+    assert work_claims(None, {}) == [] and work_claims(tmp_path, {}) == []
+    lines = [json.dumps(r) for r in pomdp_rows([3.0, 3.1], [3.0, 3.1])]
+    (tmp_path / "pomdp.jsonl").write_text("\n".join(lines) + "\n\n")
+    (claim,) = work_claims(tmp_path, {})
+    assert "issue 33" in claim.claim
