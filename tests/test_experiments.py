@@ -113,13 +113,18 @@ def test_report_end_to_end_on_tiny_budgets(
     assert not (logdir / "paper" / "grid-a2cm-paper-s0").exists()
     assert "[s0](../runs/paper/grid-a2cm-s0)" in (out / "RESULTS.md").read_text()
 
-    # the runs as the repository keeps them (docs/runs, .gitignore): no log, and no
-    # checkpoint but those the cross-play plays; the same report, figures and all
+    # the runs as the repository keeps them (docs/runs, .gitignore): no log, no checkpoint,
+    # the actors the cross-play plays; the same report, cross-play, figures and all
     text = (out / "RESULTS.md").read_text()
+    actors = sorted(p.relative_to(logdir).as_posix() for p in logdir.rglob("report_actors.pt"))
+    assert actors == [
+        *(f"descent/grid_vs-{a}-descent-s0/report_actors.pt" for a in ("a2c", "a2cm")),
+        "ours/grid-a2cm-s0/report_actors.pt",
+        *(f"selfplay/grid_vs-{a}-s0/report_actors.pt" for a in ("a2c", "a2cm")),
+    ]
     for f in [*logdir.rglob("episodes*.mcap"), *logdir.rglob("checkpoint*.pt")]:
-        played = {"selfplay", "descent"} & set(f.parts) or f.parent.name.startswith("grid-a2cm")
-        if f.name != "checkpoint.pt" or not played or "paper" in f.parts:
-            f.unlink()
+        f.unlink()
+    crossplay = json.loads((out / "results.json").read_text())["crossplay"]
     figures = {f: f.stat().st_mtime_ns for f in (out / "figures").glob("*.png")}
     assert experiments.main([*argv, "--report-only"]) == 0
     again = (out / "RESULTS.md").read_text()
@@ -127,6 +132,7 @@ def test_report_end_to_end_on_tiny_budgets(
         text.split("## Claims")[1].split("Total wall time")[0]
     )
     assert all(f.stat().st_mtime_ns > t for f, t in figures.items())  # drawn again
+    assert json.loads((out / "results.json").read_text())["crossplay"] == crossplay
     assert "could not be measured" not in again
 
     # --quote-in rewrites another document's quotes of the headline figures
@@ -295,14 +301,24 @@ def test_verdicts() -> None:
 def test_cross_play_cache_tells_a_retrained_run_from_the_old_one(tmp_path: Path) -> None:
     import os
 
-    from a2cm_phys.study.report.measure import _stamped
+    from a2cm_phys.study.report.measure import ACTORS_FILE, _stamped, played_actors
+    from a2cm_phys.training import checkpoint
 
     run = tmp_path / "grid_vs-a2cm-s0"
     run.mkdir()
-    (run / "checkpoint.pt").write_bytes(b"old")
-    before = _stamped((str(run), "random"))
+    state = {"scenario": {}, "train": {}, "update": 7, "learner": {"model": {}}, "rng": {},
+             "stats": {"episodes": 3}, "wall_time": 1.0, "descent": {"values": [1.0] * 999}}
+    checkpoint.save(run / "checkpoint.pt", state)  # fmt: skip
+    played = played_actors(run)
+    assert played == str(run / ACTORS_FILE)
+    kept = checkpoint.load(played)
+    assert kept["descent"] is None and kept["update"] == 7  # training's tables left out
+    before = _stamped((played, "random"))
     assert before[1] == "random"  # named policies are their own identity
     os.utime(run / "checkpoint.pt", ns=(1, 1))  # a copy of the run (a clone): the same
-    assert _stamped((str(run), "random")) == before
-    (run / "checkpoint.pt").write_bytes(b"new")  # trained again in the same directory
-    assert _stamped((str(run), "random"))[0] != before[0]
+    assert _stamped((played_actors(run), "random")) == before
+    (run / "checkpoint.pt").unlink()  # as the repository keeps it: the actors alone
+    assert _stamped((played_actors(run), "random")) == before
+    checkpoint.save(run / "checkpoint.pt", {**state, "update": 8})  # trained again
+    assert _stamped((played_actors(run), "random"))[0] != before[0]
+    assert checkpoint.load(run / ACTORS_FILE)["update"] == 8

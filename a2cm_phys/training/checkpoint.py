@@ -57,6 +57,7 @@ __all__ = [
     "load_latest",
     "save",
     "saved_counts",
+    "write",
 ]
 
 
@@ -76,13 +77,18 @@ def save(path: str | Path, state: dict[str, Any]) -> None:
     """Write ``state`` to ``path``: a kill or a full disk leaves the old file or the new one
     (and no temp file); the file it replaces is kept as ``checkpoint.prev.pt`` beside it."""
     path = Path(path)
+    if path.is_file():
+        _keep_previous(path)
+    write(path, state)
+
+
+def write(path: str | Path, state: dict[str, Any]) -> None:
+    """Write ``state`` to ``path`` as a checkpoint file, atomically, keeping no previous
+    one (a file that is not the run's own checkpoint: a copy cut down for a reader)."""
     buffer = io.BytesIO()
     torch.save({**state, "format": FORMAT}, buffer)
     payload = buffer.getvalue()
-    data = MAGIC + hashlib.sha256(payload).digest() + payload
-    if path.is_file():
-        _keep_previous(path)
-    write_atomic(path, data)
+    write_atomic(Path(path), MAGIC + hashlib.sha256(payload).digest() + payload)
 
 
 def _keep_previous(path: Path) -> None:

@@ -25,6 +25,7 @@ from .measure import (
     measure,
     minimax_bounds,
     oracle_worst_case,
+    played_actors,
     reference,
 )
 from .plan import EXPERIMENTS, SELF_PLAY_GROUPS, PlannedRun
@@ -279,18 +280,19 @@ def crossplay_sides(
 ) -> tuple[dict[str, list[str]], dict[str, list[str]]]:
     """The cross-play's pursuer and evader groups: the named policies, each self-play
     group's algorithms' runs (``selfplay`` keyed by ``group/algo``; seeds in order) on both
-    sides, and our A2CM trained against the random evader as pursuers."""
+    sides, and our A2CM trained against the random evader as pursuers; each run as the
+    file it is played from (:func:`~.measure.played_actors`)."""
     pursuers: dict[str, list[str]] = {"oracle": ["oracle"], "minimax": ["minimax"]}
     evaders: dict[str, list[str]] = {"random": ["random"], "flee": ["flee"]}
     for key, results in selfplay.items():
-        dirs = [str(r.run.run_dir) for r in sorted(results, key=lambda r: r.seed)]
-        if dirs:
-            pursuers[team_name(key)] = dirs
-            evaders[f"{team_name(key)} evader"] = dirs
+        played = [played_actors(r.run.run_dir) for r in sorted(results, key=lambda r: r.seed)]
+        if played:
+            pursuers[team_name(key)] = played
+            evaders[f"{team_name(key)} evader"] = played
     vs_random = data.runs("ours", "grid", "a2cm")
     if vs_random:
         pursuers["A2CM vs random (ours)"] = [
-            str(r.run.run_dir) for r in sorted(vs_random, key=lambda r: r.seed)
+            played_actors(r.run.run_dir) for r in sorted(vs_random, key=lambda r: r.seed)
         ]
     return pursuers, evaders
 

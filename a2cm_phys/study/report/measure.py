@@ -235,7 +235,7 @@ def exploit(run: PlannedRun, horizon: int | None) -> dict[str, Any]:
     from ...training.exploitability import exploitability
     from ...training.runs import load_trained_run
 
-    trained = load_trained_run(run.run_dir)
+    trained = load_trained_run(played_actors(run.run_dir))
     full = trained.scenario.max_steps
     h = min(horizon or full, full)
 
@@ -308,19 +308,36 @@ def game_value_bracket(scenario_name: str, horizon: int | None, cache: Path) -> 
     return _cached(cache, key, compute)
 
 
+ACTORS_FILE = "report_actors.pt"
+"""The checkpoint the cross-play plays a run from: the run's own without what only its
+training reads (a descent run's value tables, 7 MB of its 7.7), so that the repository
+keeps the report's teams at a tenth of the size (``.gitignore``)."""
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+
+
+def played_actors(run_dir: Path) -> str:
+    """The file the cross-play loads the run from: :data:`ACTORS_FILE`, made from the run's
+    checkpoint when it is missing or was made from another one; the run directory itself
+    when there is neither (the cross-play then names what is missing)."""
+    from ...training import checkpoint
+
+    actors, full = run_dir / ACTORS_FILE, run_dir / checkpoint.CHECKPOINT_NAME
+    if full.is_file():
+        digest = _digest(full)
+        if not actors.is_file() or checkpoint.load(actors).get("made_from") != digest:
+            state = checkpoint.load(full)
+            checkpoint.write(actors, {**state, "descent": None, "made_from": digest})
+    return str(actors) if actors.is_file() else str(run_dir)
+
+
 def _stamped(pair: tuple[str, str]) -> list[str]:
-    """A pairing's cache identity: each run directory with a digest of its checkpoint, so
-    that a run trained again in the same directory is measured again, and a copy of the
-    same run (a clone of the report's runs: new modification times) is not."""
-    out = []
-    for spec in pair:
-        checkpoint = Path(spec) / "checkpoint.pt"
-        if checkpoint.exists():
-            digest = hashlib.sha256(checkpoint.read_bytes()).hexdigest()[:16]
-            out.append(f"{spec}@{digest}")
-        else:
-            out.append(spec)
-    return out
+    """A pairing's cache identity: each run's file (:func:`played_actors`) with a digest of
+    it, so that a run trained again in the same directory is measured again, and a copy of
+    the same run (a clone of the report's runs: new modification times) is not."""
+    return [f"{spec}@{_digest(Path(spec))}" if Path(spec).is_file() else spec for spec in pair]
 
 
 def cross_play(
