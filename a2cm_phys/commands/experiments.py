@@ -123,6 +123,26 @@ def build_parser() -> argparse.ArgumentParser:
             metavar="KEY=VALUE",
             help=f"{what}; one pair per flag, repeat the flag for more",
         )
+    _add_report_options(p)
+    p.add_argument(
+        "--logdir", "--sweep-dir", dest="logdir", default="logs/experiments", help="runs go here"
+    )
+    p.add_argument("--out", default="docs", help="where RESULTS.md and figures/ go")
+    p.add_argument("--address", help="Ray cluster address (default: start Ray on this machine)")
+    p.add_argument("--sequential", action="store_true", help="no Ray, even if installed")
+    p.add_argument("--dry-run", action="store_true", help="list the runs and the estimate; stop")
+    p.add_argument("--report-only", action="store_true", help="no training: report what exists")
+    p.add_argument(
+        "--estimate-updates",
+        type=int_range(0),
+        default=20,
+        help="updates of the timed short run per cell type; 0: no estimate",
+    )
+    return p
+
+
+def _add_report_options(p: argparse.ArgumentParser) -> None:
+    """The options of what the report measures and where its figures go."""
     p.add_argument(
         "--eval-episodes",
         type=int_range(1, 10_000_000),
@@ -143,14 +163,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--no-exploit", action="store_true", help="skip the exact exploitability")
     p.add_argument(
-        "--logdir", "--sweep-dir", dest="logdir", default="logs/experiments", help="runs go here"
-    )
-    p.add_argument("--out", default="docs", help="where RESULTS.md and figures/ go")
-    p.add_argument("--address", help="Ray cluster address (default: start Ray on this machine)")
-    p.add_argument("--sequential", action="store_true", help="no Ray, even if installed")
-    p.add_argument("--dry-run", action="store_true", help="list the runs and the estimate; stop")
-    p.add_argument("--report-only", action="store_true", help="no training: report what exists")
-    p.add_argument(
         "--bench-records",
         default="benchmarks/results",
         metavar="DIR",
@@ -159,19 +171,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--quote-in",
-        default="",
         metavar="FILES",
         help="comma-separated documents (e.g. README.md,BENCHMARKS.md) whose quotes of the"
         " report's headline figures (<!-- results: KEY -->…<!-- /results -->) are rewritten"
-        " from the new results.json",
+        " from the new results.json (default: none)",
     )
-    p.add_argument(
-        "--estimate-updates",
-        type=int_range(0),
-        default=20,
-        help="updates of the timed short run per cell type; 0: no estimate",
-    )
-    return p
 
 
 def check_one_pair_per_flag(argv: Sequence[str]) -> None:
@@ -293,7 +297,7 @@ def _main(argv: Sequence[str]) -> int:
     check_device(load_train(base).device)
     logdir = writable_dir(args.logdir, "--logdir")
     out = writable_dir(args.out, "--out")
-    quoting = [Path(name.strip()) for name in args.quote_in.split(",") if name.strip()]
+    quoting = [Path(name.strip()) for name in (args.quote_in or "").split(",") if name.strip()]
     for path in quoting:
         if not path.is_file():
             raise ConfigError(f"--quote-in: no file {path}")
