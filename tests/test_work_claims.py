@@ -75,9 +75,12 @@ def test_speed_target_from_recorded_pairs() -> None:
 def test_parity_rows() -> None:
     good = {"observations": 10_000, "max_abs_diff": 1e-6, "max_scaled_diff": 1e-6,
             "agreement": 1.0}  # fmt: skip
-    (claim,) = parity_claims({"ours/grid/a2cm": [good, good]})
-    assert claim.verdict == "holds"
-    assert "2 runs: greedy actions agree 100.00% of 20,000" in claim.measured
+    cells = {"ours/grid/a2cm": [good, good], "descent/grid_vs/a2c": [good],
+             "continuous/phys_cont/a2cm": [good]}  # fmt: skip
+    discrete, continuous = parity_claims(cells)
+    assert discrete.verdict == "holds" and discrete.scope.startswith("discrete control: 2 cells")
+    assert "3 runs: greedy actions agree 100.00% of 30,000" in discrete.measured
+    assert continuous.scope == "continuous control: 1 cell of continuous"
     refused = {"observations": 10_000, "error": "the exported actors differ"}
     (claim,) = parity_claims({"ours/grid/a2cm": [good, refused]})
     assert claim.verdict == "does not hold" and "1 of 2 exports refused" in claim.measured

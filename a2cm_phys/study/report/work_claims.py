@@ -84,13 +84,19 @@ def recurrent_claims(rows: list[dict[str, Any]]) -> list[Claim]:
 
 
 def parity_claims(parity: dict[str, list[dict[str, Any]]]) -> list[Claim]:
-    """Issue 34, per cell: each run's actors exported to ONNX give its greedy actions, and
-    outputs within :data:`TOLERANCE` of torch's."""
-    out = []
+    """Issue 34, discrete and continuous control apart: each run's actors exported to ONNX
+    give its greedy actions, and outputs within :data:`TOLERANCE` of torch's (``parity``
+    by ``group/scenario/algo``)."""
+    kinds: dict[str, dict[str, list[dict[str, Any]]]] = {"discrete": {}, "continuous": {}}
     for key, checks in sorted(parity.items()):
-        if not checks:
+        kind = "continuous" if key.split("/")[1].startswith("phys_cont") else "discrete"
+        if checks:
+            kinds[kind][key] = checks
+    out = []
+    for kind, cells in kinds.items():
+        if not cells:
             continue
-        group, scenario, algo = key.split("/")
+        checks = [c for cell in cells.values() for c in cell]
         n = sum(int(c["observations"]) for c in checks)
         failed = [c for c in checks if "error" in c]  # the export refused: outputs differ
         measured = [c for c in checks if "error" not in c]
@@ -99,15 +105,16 @@ def parity_claims(parity: dict[str, list[dict[str, Any]]]) -> list[Claim]:
         every = not failed and all(
             c["max_scaled_diff"] <= TOLERANCE and c["agreement"] == 1.0 for c in measured
         )
+        groups = sorted({key.split("/")[0] for key in cells})
         out.append(
             Claim(
                 "ours",
                 "Actors exported to ONNX act as the trained ones: the same greedy actions, "
                 f"outputs within {TOLERANCE:g} (issue 34)",
-                f"{group}: {scenario}, {algo.upper()}",
+                f"{kind} control: {len(cells)} cell{'s' * (len(cells) > 1)} of "
+                + ", ".join(groups),
                 f"{len(checks)} runs: greedy actions agree {100 * agree:.2f}% of {n:,} "
-                "observations; "
-                f"largest difference {worst:.1e}"
+                f"observations; largest difference {worst:.1e}"
                 + (f"; {len(failed)} of {len(checks)} exports refused" if failed else ""),
                 "— (exact check)",
                 HOLDS if every else FAILS,
