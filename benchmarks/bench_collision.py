@@ -18,6 +18,7 @@ to a process pool (``--jobs``), so wall times are only comparable within one inv
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import sys
 import tempfile
@@ -193,6 +194,12 @@ def main() -> int:
     p.add_argument("--steps", type=int, default=640_000)
     p.add_argument("--episodes", type=int, default=5000)
     p.add_argument("--jobs", type=int, default=2)
+    p.add_argument(
+        "--record",
+        metavar="FILE",
+        help="append each run, with its scenario's reference, to this .jsonl (the report's"
+        " claims read benchmarks/results/collision.jsonl)",
+    )
     args = p.parse_args()
     variants = args.variants.split(",")
     try:
@@ -234,6 +241,11 @@ def main() -> int:
                     f" {med['sampled']:.3f} | {med['sampled_coll']:.4f} | {med['seconds']:.1f} |"
                 )
         print(f"\n{what} of {s}: {best:.3f} steps, return {best_return:,.0f}")
+        if args.record:
+            with open(args.record, "a") as out:
+                for r in (r for r in rows if r["scenario"] == s):
+                    row = {**r, "reference": best, "reference_policy": what, "steps": args.steps}
+                    out.write(json.dumps(row) + "\n")
     return 0
 
 

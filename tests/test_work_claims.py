@@ -12,6 +12,7 @@ from a2cm_phys.study.report.work_claims import (
     recurrent_claims,
     scale_claims,
     speed_claims,
+    within_claims,
     work_claims,
 )
 
@@ -94,3 +95,17 @@ def test_records_folder(tmp_path: Path) -> None:
     (tmp_path / "pomdp.jsonl").write_text("\n".join(lines) + "\n\n")
     (claim,) = work_claims(tmp_path, {})
     assert "issue 33" in claim.claim
+
+
+def test_within_target_reads_the_shipped_defaults_only() -> None:
+    def row(variant: str, algo: str, greedy: float) -> dict:
+        return {"scenario": "grid_flee", "variant": variant, "algo": algo, "greedy": greedy,
+                "reference": 3.948}  # fmt: skip
+
+    rows = [row("ours", "a2cm", x) for x in (6.1, 5.9, 6.3)]
+    rows += [row("ours+onehot", "a2cm", 3.95), row("ours", "a2c", 4.0), row("ours", "a2c", 4.1)]
+    rows += [{**row("ours", "a2cm", 3.0), "scenario": "grid"}]  # no target there
+    a2c, a2cm = within_claims(rows)
+    assert a2cm.verdict == "does not hold" and a2cm.sizes == (3,)  # ablations not counted
+    assert "within 5% of the exact optimum (grid_flee)" in a2cm.claim
+    assert a2c.sizes == (2,) and a2c.verdict == "inconclusive"  # 1.026×, a wide interval
