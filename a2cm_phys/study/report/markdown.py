@@ -313,7 +313,7 @@ def later_work_section(meta: dict[str, Any]) -> list[str]:
         '<a id="later-work"></a>',
         "## Later work: partial observability, export, scale and speed",
         "",
-        "The claims marked issue 33, 34 and 35 test those issues' targets. Export parity is "
+        "The claims that name an issue test that issue's target. Export parity is "
         "measured here: each run whose checkpoint is at hand is exported to ONNX and its "
         "actors compared with torch's on 10,000 observations (cached beside the run). The "
         f"others come from {source}. A target an issue missed is a row like any other, "
