@@ -310,8 +310,9 @@ def game_value_bracket(scenario_name: str, horizon: int | None, cache: Path) -> 
 
 ACTORS_FILE = "report_actors.pt"
 """The checkpoint the cross-play plays a run from: the run's own without what only its
-training reads (a descent run's value tables, 7 MB of its 7.7), so that the repository
-keeps the report's teams at a tenth of the size (``.gitignore``)."""
+training reads (a descent run's value tables, 7 MB of its 7.7; a self-play run's pool of
+past opponents), so that the repository keeps the report's teams at a tenth of the size
+(``.gitignore``)."""
 
 
 def _digest(path: Path) -> str:
@@ -329,7 +330,8 @@ def played_actors(run_dir: Path) -> str:
         digest = _digest(full)
         if not actors.is_file() or checkpoint.load(actors).get("made_from") != digest:
             state = checkpoint.load(full)
-            checkpoint.write(actors, {**state, "descent": None, "made_from": digest})
+            slim = {**state, "descent": None, "pool": None, "made_from": digest}
+            checkpoint.write(actors, slim)
     return str(actors) if actors.is_file() else str(run_dir)
 
 
