@@ -188,7 +188,10 @@ SELF_PLAY_TEXT = {
     "selfplay": "Pursuers (A2C or A2CM) and an A2C evader learn together on `grid_vs`.",
     "descent": "Pursuers (A2C or A2CM) and an A2C evader learn together on `grid_vs`, both "
     "by exploitability descent (`--preset descent`: every few updates each team steps "
-    "towards beating the other's exact best response).",
+    "towards beating the other's exact best response). The evader's step reads only its own "
+    "policy (the pursuers' exact best response to it) and its rollout learner is not "
+    "stepped, so runs of one seed share one evader whatever the pursuers' algorithm: the "
+    "A2C and A2CM descent evaders are the same policies, and their cross-play columns agree.",
 }
 
 
