@@ -214,6 +214,9 @@ def test_session_totals_count_overlapping_sessions_once() -> None:
     assert totals["clock_wall"] == 50.0 + 150.0 + 10.0 + 5.0  # 1000–1150 counted once
     assert totals["sessions"] == 5
     assert totals["parallel"] == "sequential, on Ray"  # report-only sessions train nothing
+    newer = {"command": "x", "elapsed_s": 1.0, "started": 4000.0, "training": "on Ray, 2 at a time"}
+    # an older record's bare "on Ray" is not named beside the newer, fuller one
+    assert session_totals([*sessions, newer])["parallel"] == "sequential, on Ray, 2 at a time"
 
 
 # --------------------------------------------------------------------------- statistics

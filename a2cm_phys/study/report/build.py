@@ -56,11 +56,13 @@ def session_totals(sessions: list[dict[str, Any]]) -> dict[str, Any]:
             continue  # trained nothing
         how = s.get("training") or ("sequential" if "--sequential" in s["command"] else "on Ray")
         ways.append(how)
+    # an older record says only "on Ray" where a newer one says how many at a time
+    distinct = [w for w in dict.fromkeys(ways) if not any(o != w and o.startswith(w) for o in ways)]
     return {
         "total_wall": sum(float(s["elapsed_s"]) for s in sessions),
         "clock_wall": clock,
         "sessions": len(sessions),
-        "parallel": ", ".join(dict.fromkeys(ways)) or "none: the runs existed already",
+        "parallel": ", ".join(distinct) or "none: the runs existed already",
     }
 
 
