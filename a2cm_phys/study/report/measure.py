@@ -34,14 +34,17 @@ EVAL_SEED = 10_000
 """Seed of the evaluation episodes (apart from every training seed)."""
 
 
+def _cache_of(path: Path) -> dict[str, Any]:
+    """What the JSON cache ``path`` holds (nothing if it is missing or unreadable)."""
+    try:
+        return json.loads(path.read_text()) if path.exists() else {}
+    except (OSError, ValueError):
+        return {}
+
+
 def _cached(path: Path, key: str, compute: Any) -> Any:
     """``compute()`` unless ``path`` (a JSON object) holds ``key``; stores the result."""
-    data: dict[str, Any] = {}
-    if path.exists():
-        try:
-            data = json.loads(path.read_text())
-        except (OSError, ValueError):
-            data = {}
+    data = _cache_of(path)
     if key in data:
         return data[key]
     value = compute()
@@ -174,10 +177,7 @@ def export_parity(run: PlannedRun, observations: int = PARITY_OBSERVATIONS) -> d
     (a copy of the report's runs keeps few) and nothing cached, or onnx not installed."""
     path = run.run_dir / "report_eval.json"
     key = f"parity-{observations}"
-    try:
-        cached = json.loads(path.read_text()) if path.exists() else {}
-    except (OSError, ValueError):
-        cached = {}
+    cached = _cache_of(path)
     if key in cached:
         return cached[key]
     ready = all(importlib.util.find_spec(m) for m in ("onnx", "onnxruntime"))

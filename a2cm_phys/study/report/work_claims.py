@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ...analysis.stats import FAILS, HOLDS, mean_interval, ratio_interval, verdict_bound
-from .claim import Claim, fmt
+from .claim import Claim, ci_text, fmt
 
 RECURRENT_TARGET = 0.85
 """Issue 33: recurrent actors' greedy capture steps at most this × memoryless actors'."""
@@ -68,7 +68,7 @@ def ratio_claim(
         claim,
         scope,
         f"{measured} ({interval[0]:.3f}×)",
-        f"[{fmt(interval[1])}, {fmt(interval[2])}]",
+        ci_text(interval),
         verdict_bound(interval, at_most=target),
         f"t interval of the ratio vs target; `{source}`",
         "#later-work",
@@ -96,7 +96,7 @@ def recurrent_claims(rows: list[dict[str, Any]]) -> list[Claim]:
                 f"{scenario}, {algo.upper()}",
                 f"{fmt(np.mean(recurrent))} vs {fmt(np.mean(memoryless))} steps "
                 f"({ratio[0]:.3f}×)",
-                f"[{fmt(ratio[1])}, {fmt(ratio[2])}]",
+                ci_text(ratio),
                 verdict_bound(ratio, at_most=RECURRENT_TARGET),
                 "bootstrap ratio CI (seeds) vs target; `benchmarks/bench_pomdp.py`",
                 "#later-work",
