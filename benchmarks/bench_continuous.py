@@ -88,10 +88,7 @@ def vmas_steps(env, steps: int, seed: int) -> float:
     gen = torch.Generator().manual_seed(seed)
     b = env.num_envs
     plan = [
-        [
-            (torch.rand(b, 2, generator=gen) * 2 - 1) * agent.action.u_range
-            for agent in env.agents
-        ]
+        [(torch.rand(b, 2, generator=gen) * 2 - 1) * agent.action.u_range for agent in env.agents]
         for _ in range(steps)
     ]
     env.reset()

@@ -44,15 +44,19 @@ def main() -> None:
     visits = state_visits(chain, start, scenario.max_steps)
     q = 1.0 + np.einsum("sb,sb->s", chain.cont, np.nan_to_num(optimum)[chain.next])
     loss = visits * (q - optimum)
-    print(f"greedy {steps[start]:.4f} steps, optimum {optimum[start]:.4f}: "
-          f"{steps[start] - optimum[start]:.4f} lost; Σ visits·loss = {np.nansum(loss):.4f}")
+    print(
+        f"greedy {steps[start]:.4f} steps, optimum {optimum[start]:.4f}: "
+        f"{steps[start] - optimum[start]:.4f} lost; Σ visits·loss = {np.nansum(loss):.4f}"
+    )
     oracle = grid.joint_to_actions(solution.policy)
     for s in np.argsort(-np.nan_to_num(loss))[: args.top]:
         cells = grid.decode(np.array([s]))[:, 0]
         where = " ".join(f"({c // scenario.size},{c % scenario.size})" for c in cells)
-        print(f"state {s}: pursuers, evader {where}  visits {visits[s]:.3f}  "
-              f"loses {q[s] - optimum[s]:.3f} steps  team {greedy[s].tolist()}  "
-              f"oracle {oracle[s].tolist()}  largest probabilities {table[s].max(-1).round(2)}")
+        print(
+            f"state {s}: pursuers, evader {where}  visits {visits[s]:.3f}  "
+            f"loses {q[s] - optimum[s]:.3f} steps  team {greedy[s].tolist()}  "
+            f"oracle {oracle[s].tolist()}  largest probabilities {table[s].max(-1).round(2)}"
+        )
 
 
 if __name__ == "__main__":

@@ -128,8 +128,9 @@ def test_report_end_to_end_on_tiny_budgets(
     figures = {f: f.stat().st_mtime_ns for f in (out / "figures").glob("*.png")}
     assert experiments.main([*argv, "--report-only"]) == 0
     again = (out / "RESULTS.md").read_text()
-    assert again.split("## Claims")[1].split("Total wall time")[0] == (
-        text.split("## Claims")[1].split("Total wall time")[0]
+    assert (
+        again.split("## Claims")[1].split("Total wall time")[0]
+        == (text.split("## Claims")[1].split("Total wall time")[0])
     )
     assert all(f.stat().st_mtime_ns > t for f, t in figures.items())  # drawn again
     assert json.loads((out / "results.json").read_text())["crossplay"] == crossplay
@@ -309,8 +310,16 @@ def test_cross_play_cache_tells_a_retrained_run_from_the_old_one(tmp_path: Path)
 
     run = tmp_path / "grid_vs-a2cm-s0"
     run.mkdir()
-    state = {"scenario": {}, "train": {}, "update": 7, "learner": {"model": {}}, "rng": {},
-             "stats": {"episodes": 3}, "wall_time": 1.0, "descent": {"values": [1.0] * 999}}
+    state = {
+        "scenario": {},
+        "train": {},
+        "update": 7,
+        "learner": {"model": {}},
+        "rng": {},
+        "stats": {"episodes": 3},
+        "wall_time": 1.0,
+        "descent": {"values": [1.0] * 999},
+    }
     checkpoint.save(run / "checkpoint.pt", state)  # fmt: skip
     played = played_actors(run)
     assert played == str(run / ACTORS_FILE)

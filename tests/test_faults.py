@@ -395,8 +395,8 @@ def test_no_output_replaces_a_runs_own_files(tmp_path, capsys):
         assert err.startswith("error: ") and err.count("\n") == 1
     assert {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()} == files
     capsys.readouterr()
-    assert replay_main([str(run_dir), "--render", "gif", "--out", str(run_dir / "summary.gif"),
-                        "--episode", "1"]) == 0  # fmt: skip  (a .gif beside the run is fine)
+    gif = run_dir / "summary.gif"  # a .gif beside the run is fine
+    assert replay_main([str(run_dir), "--render", "gif", "--out", str(gif), "--episode", "1"]) == 0
 
 
 # ------------------------------------------------------------------------------ outcomes

@@ -32,6 +32,7 @@ def paper_cfg(**options: object) -> Train:
     plain loss these tests check piece by piece (the defaults add our pieces on top)."""
     return resolve_train(GRID, Train(**{**preset("paper"), **options}))
 
+
 N, OBS, A = 3, 8, 4
 
 

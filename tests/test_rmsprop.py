@@ -14,8 +14,9 @@ from a2cm_phys.algos.rmsprop import KerasRMSprop
 def twins() -> tuple[ActorCritic, ActorCritic]:
     """Two identical small models (A2C: several critics, so several parameter shapes)."""
     return tuple(  # type: ignore[return-value]
-        ActorCritic(8, 3, 4, 16, shared_critic=False, n_values=2,
-                    generator=torch.Generator().manual_seed(0))
+        ActorCritic(
+            8, 3, 4, 16, shared_critic=False, n_values=2, generator=torch.Generator().manual_seed(0)
+        )
         for _ in range(2)
     )
 

@@ -112,4 +112,3 @@ def sample_categorical(logits: np.ndarray, rng: np.random.Generator) -> np.ndarr
     ``logits.size`` Gumbel variates from ``rng``. Returns int64 of shape ``logits.shape[:-1]``.
     """
     return (logits + rng.gumbel(size=logits.shape)).argmax(-1).astype(np.int64, copy=False)
-

@@ -33,6 +33,7 @@ SAMPLE = 10
 """Episodes ``--export-foxglove`` and ``--serve`` take without ``--episode``: the last ones
 logged (the whole log of the main job would be 55 MB of scenes)."""
 
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``python -m a2cm_phys.replay`` argument parser."""
     p = Parser(
@@ -93,8 +94,7 @@ def _add_log_options(p: argparse.ArgumentParser) -> None:
         "--wait",
         type=positive_float,
         metavar="SECONDS",
-        help="--serve waits this long for a client before playing (default: as long as it"
-        " takes)",
+        help="--serve waits this long for a client before playing (default: as long as it takes)",
     )
     p.add_argument(
         "--speed",

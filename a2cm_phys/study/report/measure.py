@@ -149,9 +149,7 @@ def measure(run: PlannedRun, summary: dict[str, Any], eval_episodes: int) -> Run
         f"greedy-{stamp}-{eval_episodes}",
         lambda: {k: v for k, v in greedy_eval(run_dir, eval_episodes).items() if k != "lengths"},
     )
-    curve = _cached(
-        run_dir / "report_eval.json", f"curve-{stamp}", lambda: training_curve(run_dir)
-    )
+    curve = _cached(run_dir / "report_eval.json", f"curve-{stamp}", lambda: training_curve(run_dir))
     greedy.pop("lengths", None)  # caches written before kept them
     return RunResult(
         run=run,

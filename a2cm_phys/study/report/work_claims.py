@@ -94,8 +94,7 @@ def recurrent_claims(rows: list[dict[str, Any]]) -> list[Claim]:
                 f"Recurrent ({memory}) actors capture in at most {RECURRENT_TARGET}× the "
                 "memoryless actors' greedy steps (issue 33)",
                 f"{scenario}, {algo.upper()}",
-                f"{fmt(np.mean(recurrent))} vs {fmt(np.mean(memoryless))} steps "
-                f"({ratio[0]:.3f}×)",
+                f"{fmt(np.mean(recurrent))} vs {fmt(np.mean(memoryless))} steps ({ratio[0]:.3f}×)",
                 ci_text(ratio),
                 verdict_bound(ratio, at_most=RECURRENT_TARGET),
                 "bootstrap ratio CI (seeds) vs target; `benchmarks/bench_pomdp.py`",
@@ -190,8 +189,7 @@ def oracle_claims(rows: list[dict[str, Any]]) -> list[Claim]:
     return [
         Claim(
             "ours",
-            f"The exact optimum is solved on a {size}×{size} grid within {budget:g} GiB "
-            "(issue 35)",
+            f"The exact optimum is solved on a {size}×{size} grid within {budget:g} GiB (issue 35)",
             f"{best['scenario']}, {best['pursuers']} pursuers",
             f"{best['size']}×{best['size']}: {best['capture_steps']:.4f} steps, "
             f"peak {best['peak_gib']:.2f} GiB, {best['seconds']:.0f} s",
