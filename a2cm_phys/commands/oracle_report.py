@@ -29,14 +29,23 @@ def optimum_report(sol: OracleSolution | SymmetricResult) -> str:
         f"  optimal expected return: {sol.optimal_return(start):.6f}",
         f"  expected steps to capture: {sol.expected_capture_steps(start):.6f}",
     ]
-    if not np.isfinite(sol.optimal_return(start)):
+    if sc.start.random:
+        from ..envs.starts import count_grid_starts
+
+        lines[-3] = (
+            f"  start: random, uniform over {count_grid_starts(sc):,} starts (every pursuer "
+            f"at Manhattan distance >= {sc.start.min_evader_distance:g} from the evader)"
+        )
+        lines[-2] = f"  optimal expected return over the starts: {sol.start_value:.6f}"
+        lines[-1] = f"  expected steps to capture over the starts: {sol.start_steps:.6f}"
+    if not np.isfinite(sol.start_value):
         lines.append("  capture cannot be forced from the start: no finite optimum")
         return "\n".join(lines)
     if sc.collisions.mode != "off" and not isinstance(sol, SymmetricResult):
         lines.append(
             f"  P(capture) {dist.p_capture:.6f}, P(ended by collision) "
             f"{dist.collision.sum():.2e}, expected collisions "
-            f"{float(sol.collisions[sol.index(start)]):.2e}"
+            f"{float(sol.start_law[1] @ sol.collisions[sol.start_law[0]]):.2e}"
         )
     median, p95 = dist.quantile(0.5), dist.quantile(0.95)
     lines.append(

@@ -59,6 +59,7 @@ from .scenario import (
     Rewards,
     Scenario,
     Sensing,
+    Start,
 )
 from .train import (
     PRESETS,
@@ -105,6 +106,7 @@ __all__ = [
     "Scenario",
     "Schedule",
     "Sensing",
+    "Start",
     "Train",
     "build",
     "check_limits",

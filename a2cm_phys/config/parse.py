@@ -78,6 +78,8 @@ def _build(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
     for name, value in data.items():
         key, hint = f"{prefix}{name}", hints[name]
         if dataclasses.is_dataclass(hint):
+            if isinstance(value, str) and hasattr(hint, "shorthand"):
+                value = {hint.shorthand: value}  # e.g. start = "random"
             kwargs[name] = _build(hint, value, f"{key}.")
         else:
             kwargs[name] = _coerce(value, hint, key)

@@ -15,6 +15,7 @@ EvaderPolicy = Literal["random", "flee", "static", "learned"]  # learned: an age
 EvaderReward = Literal["zero_sum", "survival"]
 CollisionMode = Literal["off", "terminate", "penalize"]
 Control = Literal["discrete", "continuous"]
+StartKind = Literal["fixed", "random"]
 
 SCRIPTED_EVADERS: tuple[str, ...] = tuple(
     e for e in typing.get_args(EvaderPolicy) if e != "learned"
@@ -123,6 +124,34 @@ class Sensing:
 
 
 @dataclass(frozen=True)
+class Start:
+    """Where episodes start. ``fixed`` (the default, the paper's): pursuers in the corners,
+    then along the border, the evader in the centre. ``random``: every agent's cell (grid)
+    or position (physics) drawn uniformly from the episode's seed over the valid starts:
+    no two agents on one cell (grid) or touching (physics), every body clear of the walls,
+    and every pursuer at least ``min_evader_distance`` from the evader (grid: Manhattan
+    distance in cells, so the default 2 keeps pursuers off and not next to the evader;
+    physics: metres between centres). ``start = "random"`` is short for
+    ``[start] kind = "random"``."""
+
+    shorthand: typing.ClassVar[str] = "kind"  # a bare string value sets this key
+    kind: StartKind = "fixed"
+    min_evader_distance: float = 2.0
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the key of an impossible value."""
+        if not self.min_evader_distance >= 0:
+            raise InvalidKey(
+                "start.min_evader_distance", f"must be >= 0, got {self.min_evader_distance!r}"
+            )
+
+    @property
+    def random(self) -> bool:
+        """Whether starts are drawn from the episode's seed."""
+        return self.kind == "random"
+
+
+@dataclass(frozen=True)
 class Scenario:
     """One pursuit game: arena, agents, evader, time limit, rewards and collision mode."""
 
@@ -138,6 +167,7 @@ class Scenario:
     collisions: Collisions = field(default_factory=Collisions)
     physics: Physics = field(default_factory=Physics)
     sensing: Sensing = field(default_factory=Sensing)
+    start: Start = field(default_factory=Start)
 
     def __post_init__(self) -> None:
         if self.physics.dt is None:  # the control type decides the default period
@@ -163,6 +193,7 @@ class Scenario:
             raise InvalidKey("max_steps", f"must be >= 1, got {self.max_steps}")
         self.physics.validate()
         self.sensing.validate()
+        self.start.validate()
         if self.mode == "physics":
             self.physics.check_substeps()
         elif self.control != "discrete":

@@ -24,6 +24,7 @@ from .core import (
 )
 from .evaders import make_evader
 from .evaders.learned import refuse_evader_actions
+from .starts import random_starts
 
 
 def meet(old_a: np.ndarray, new_a: np.ndarray, old_b: np.ndarray, new_b: np.ndarray) -> np.ndarray:
@@ -126,11 +127,16 @@ class GridCore:
         seeds: np.ndarray,
         positions: Sequence[Mapping[str, Sequence[float]] | None] | None = None,
     ) -> None:
-        """Start new episodes in games ``envs``; optional explicit positions per game."""
+        """Start new episodes in games ``envs`` at the scenario's start (random starts drawn
+        from ``seeds``, :mod:`.starts`); optional explicit positions per game."""
         self.t[envs] = 0
         self.episode_seed[envs] = seeds
         self._evader.restart(envs, self.episode_seed[envs])
-        self.cells[:, envs] = self._start[:, None]
+        if self.scenario.start.random:
+            xy = random_starts(self.scenario, self.episode_seed[envs])  # (K, N + 1, 2)
+            self.cells[:, envs] = (xy[..., 0] + self.scenario.size * xy[..., 1]).T
+        else:
+            self.cells[:, envs] = self._start[:, None]
         for env, placed in zip(np.atleast_1d(envs), positions or (), strict=False):
             if placed:
                 self.cells[:, env] = self._cells_from(placed)

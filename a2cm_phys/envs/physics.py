@@ -39,6 +39,7 @@ from .core import (
 )
 from .evaders import make_evader
 from .evaders.learned import refuse_evader_actions
+from .starts import random_starts
 from .world import Worlds
 
 
@@ -139,11 +140,14 @@ class PhysicsCore(StateViews):
         positions: Sequence[Mapping[str, Sequence[float]] | None] | None = None,
     ) -> None:
         """Start new episodes in games ``envs``: rebuild their spaces
-        (:meth:`~.world.World.rebuild`), at the default start or at explicit ``positions``
+        (:meth:`~.world.World.rebuild`), at the scenario's start (random starts drawn from
+        ``seeds``, :mod:`.starts`) or at explicit ``positions``
         (one mapping or ``None`` per game, metres)."""
         envs = np.atleast_1d(np.asarray(envs, dtype=np.int64))
         placed = list(positions or ())
         starts: list[np.ndarray | None] = [None] * len(envs)
+        if self.scenario.start.random:
+            starts = list(random_starts(self.scenario, seeds))
         for k, where in enumerate(placed[: len(envs)]):
             if where:  # validate everything before touching any game
                 starts[k] = placed_positions(self.scenario, where)

@@ -24,7 +24,7 @@ from ..envs.core import default_start
 from . import GridModel, capture_distribution, evaluate_policy, policy_chain, solve_dp
 from .policy_chain import CaptureDistribution, PolicyChain
 from .symmetric import EVADERS, SymmetricResult, solve_symmetric
-from .tables import state_index
+from .tables import start_law, state_index
 from .transitions import TooLargeError
 
 if TYPE_CHECKING:  # the solver imports torch: only when the game's value is asked for
@@ -122,10 +122,29 @@ class OracleSolution:
         """The scenario's default start ``(N + 1, 2)`` (SPEC §1)."""
         return default_start(self.scenario.size, self.scenario.pursuers)
 
+    @cached_property
+    def start_law(self) -> tuple[np.ndarray, np.ndarray]:
+        """The scenario's start distribution: states and probabilities (:func:`start_law`)."""
+        return start_law(self.scenario)
+
+    @property
+    def start_steps(self) -> float:
+        """Expected steps to the episode's end, playing optimally, over the start
+        distribution (exactly: every start enumerated)."""
+        idx, p = self.start_law
+        return float(p @ self.steps[idx])
+
+    @property
+    def start_value(self) -> float:
+        """Optimal expected return over the start distribution."""
+        idx, p = self.start_law
+        return float(p @ self.value[idx])
+
     def distribution(self, positions: np.ndarray | None = None) -> CaptureDistribution:
-        """Exact law of the episode's end under the optimal policy (default: from the start)."""
-        pos = self.start_positions() if positions is None else np.asarray(positions)
-        return capture_distribution(self.chain, int(self.index(pos)), self.scenario.max_steps)
+        """Exact law of the episode's end under the optimal policy, from ``positions``
+        (default: over the scenario's start distribution)."""
+        start = self.start_law if positions is None else int(self.index(np.asarray(positions)))
+        return capture_distribution(self.chain, start, self.scenario.max_steps)
 
 
 def _write_npz(path: Path, **arrays: np.ndarray) -> None:

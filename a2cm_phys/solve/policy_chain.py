@@ -127,20 +127,30 @@ class CaptureDistribution:
         return float(hit[0] + 1) if len(hit) else float("inf")
 
 
+StartLaw = int | tuple[np.ndarray, np.ndarray]
+"""Where a propagation starts: one state index, or states and their probabilities
+(:func:`~.tables.start_law`)."""
+
+
 def propagate(
     chain: PolicyChain,
-    start: int,
+    start: StartLaw,
     max_steps: int,
     visit: Callable[[np.ndarray, np.ndarray], None],
     eps: float = 1e-15,
 ) -> float:
-    """Push the state distribution from state ``start`` through ``chain``, step by step.
+    """Push the state distribution from ``start`` (a state, or a law over states) through
+    ``chain``, step by step.
 
     ``visit(states, mass)`` sees each step's distribution before the step is taken (unique
     state indices and their probabilities), for up to ``max_steps`` steps or until less than
     ``eps`` of the mass is still running. Returns the mass still running at the end.
     """
-    idx, mass = np.array([start]), np.array([1.0])
+    if isinstance(start, tuple):
+        idx, inverse = np.unique(np.asarray(start[0]), return_inverse=True)
+        mass = np.bincount(inverse, weights=np.asarray(start[1]), minlength=len(idx))
+    else:
+        idx, mass = np.array([start]), np.array([1.0])
     for _ in range(max_steps):
         visit(idx, mass)
         flow = (mass[:, None] * chain.cont[idx]).ravel()
@@ -154,9 +164,9 @@ def propagate(
 
 
 def capture_distribution(
-    chain: PolicyChain, start: int, max_steps: int, eps: float = 1e-15
+    chain: PolicyChain, start: StartLaw, max_steps: int, eps: float = 1e-15
 ) -> CaptureDistribution:
-    """The law of the episode's end from state ``start`` (:func:`propagate`)."""
+    """The law of the episode's end from ``start``, a state or a law (:func:`propagate`)."""
     capture, collision = [], []
 
     def visit(idx: np.ndarray, mass: np.ndarray) -> None:
@@ -167,7 +177,7 @@ def capture_distribution(
     return CaptureDistribution(np.array(capture), np.array(collision), left)
 
 
-def state_visits(chain: PolicyChain, start: int, max_steps: int) -> np.ndarray:
+def state_visits(chain: PolicyChain, start: StartLaw, max_steps: int) -> np.ndarray:
     """Expected visits ``(S,)`` of every state within ``max_steps`` steps from ``start``
     (they sum to the expected episode length, truncated at ``max_steps``)."""
     visits = np.zeros(len(chain.next))

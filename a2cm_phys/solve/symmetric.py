@@ -22,6 +22,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -31,7 +32,7 @@ from ..envs.core import default_start
 from .policy_chain import CaptureDistribution
 from .symmetric_sweep import CHUNK_ENTRIES, CanonicalBackup, Greedy
 from .symmetry import CanonicalIndex, Symmetry
-from .tables import state_index
+from .tables import start_law, state_index
 from .transitions import TooLargeError, UnsupportedError, check_supported
 
 MEMORY_BUDGET = 8 * 2**30
@@ -140,12 +141,14 @@ class SymmetricResult:
         self, positions: np.ndarray | None = None, max_steps: int | None = None, tail: float = 1e-12
     ) -> tuple[np.ndarray, float]:
         """Law of the episode's end under the optimal policy, from ``positions`` (default:
-        the start): ``P(ends at step k)`` for ``k = 1, 2, …`` until ``max_steps`` (default:
-        the scenario's) or until less than ``tail`` is left, and the mass left then."""
-        pos = self.start_positions() if positions is None else positions
+        over the scenario's start distribution): ``P(ends at step k)`` for ``k = 1, 2, …``
+        until ``max_steps`` (default: the scenario's) or until less than ``tail`` is left, and the mass left then."""
         n, nb = self.index.n, len(self.succ)
         mass = np.zeros(n + 1)
-        mass[self.ids(pos)] = 1.0
+        if positions is None:
+            mass[: n + 1] = self.start_mass
+        else:
+            mass[self.ids(positions)] = 1.0
         ended, left = [], float(mass[:n].sum())
         for _ in range(self.scenario.max_steps if max_steps is None else max_steps):
             if left < tail:
@@ -187,15 +190,24 @@ class SymmetricResult:
             float(need),
         )  # fmt: skip
 
+    @cached_property
+    def start_mass(self) -> np.ndarray:
+        """``(n + 1,)`` the start distribution's probability of each canonical state (the
+        last, the captured sentinel, gets none): the starts enumerated as sets of pursuer
+        cells (the pursuers here are interchangeable), each mapped to its canonical state."""
+        idx, p = start_law(self.scenario, ordered=False)
+        return np.bincount(self.index.ids[idx], weights=p, minlength=self.index.n + 1)
+
     @property
     def start_value(self) -> float:
-        """Optimal expected return from the default start."""
-        return float(self.optimal_return(self.start_positions()))
+        """Optimal expected return over the start distribution."""
+        return float(self.start_mass @ np.append(self.value, 0.0))
 
     @property
     def start_steps(self) -> float:
-        """Expected steps to the episode's end from the default start, playing optimally."""
-        return float(self.expected_capture_steps(self.start_positions()))
+        """Expected steps to the episode's end, playing optimally, over the start
+        distribution (exactly: every start enumerated)."""
+        return float(self.start_mass @ np.append(self.steps, 0.0))
 
 
 def evaluate(

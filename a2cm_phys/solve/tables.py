@@ -35,6 +35,7 @@ from ..config import SCRIPTED_EVADERS, Scenario
 from ..envs.core import default_start
 from ..envs.evaders.scripted import STAY
 from ..envs.grid import GridRules
+from ..envs.starts import grid_start_chunks
 
 ROW_TOLERANCE = 1e-6
 """How far from 1 a row of a table may sum (models' softmax outputs are float32-exact)."""
@@ -87,8 +88,19 @@ def state_index(scenario: Scenario, positions: np.ndarray) -> np.ndarray:
 
 
 def start_state(scenario: Scenario) -> int:
-    """Index of the scenario's default start (SPEC §1)."""
+    """Index of the scenario's default (fixed) start (SPEC §1)."""
     return int(state_index(scenario, default_start(scenario.size, scenario.pursuers)))
+
+
+def start_law(scenario: Scenario, ordered: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """The scenario's start distribution over joint states: state indices and their
+    probabilities (one state for the fixed start; uniform over every valid start for
+    ``start = "random"``, :func:`~a2cm_phys.envs.starts.grid_start_chunks`, whose
+    ``ordered`` it passes on)."""
+    idx = np.concatenate(
+        [state_index(scenario, chunk) for chunk in grid_start_chunks(scenario, ordered)]
+    )
+    return idx, np.full(len(idx), 1.0 / len(idx))
 
 
 def joint_observations(scenario: Scenario, index: np.ndarray | None = None) -> np.ndarray:
