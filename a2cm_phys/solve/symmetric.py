@@ -142,7 +142,8 @@ class SymmetricResult:
     ) -> tuple[np.ndarray, float]:
         """Law of the episode's end under the optimal policy, from ``positions`` (default:
         over the scenario's start distribution): ``P(ends at step k)`` for ``k = 1, 2, …``
-        until ``max_steps`` (default: the scenario's) or until less than ``tail`` is left, and the mass left then."""
+        until ``max_steps`` (default: the scenario's) or until less than ``tail`` is left,
+        and the mass left then."""
         n, nb = self.index.n, len(self.succ)
         mass = np.zeros(n + 1)
         if positions is None:
