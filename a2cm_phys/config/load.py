@@ -80,7 +80,9 @@ def load_scenario(
         data, source = read_toml(path), str(path)
         data.setdefault("name", path.stem)
     if overrides:
-        build(Scenario, data, source)  # the file alone must be valid, and be blamed if not
+        # the file alone must be valid, and be blamed if not; its full form then takes the
+        # overrides, so that a dotted key reaches a table the file wrote short (start = "random")
+        data = to_dict(build(Scenario, data, source))
         data, source = merge_overrides(data, overrides), f"{source} (with overrides)"
     return build(Scenario, data, source)
 

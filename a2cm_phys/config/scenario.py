@@ -4,6 +4,7 @@ rewards, collisions, physics, sensing), validated when built."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 from dataclasses import dataclass, field
 from typing import Literal
@@ -194,11 +195,35 @@ class Scenario:
         self.physics.validate()
         self.sensing.validate()
         self.start.validate()
+        if self.start.random:
+            self._check_start_room()
         if self.mode == "physics":
             self.physics.check_substeps()
         elif self.control != "discrete":
             raise InvalidKey(
                 "control", f"{self.control!r} needs mode = 'physics' (grid moves are discrete)"
+            )
+
+    def _check_start_room(self) -> None:
+        """Refuse a ``start.min_evader_distance`` no start can keep: on a grid, exactly (no
+        evader cell with ``pursuers`` cells that far); in physics, beyond the farthest a
+        pursuer's centre can be from the evader's."""
+        d, n = self.start.min_evader_distance, self.size
+        if self.mode == "grid":
+            # an evader in a corner has the most cells that far (along any row or column a
+            # border cell is the farthest from most cells): count the cells x + y >= d
+            need = max(math.ceil(d), 1)
+            room = sum(max(0, n - max(0, need - x)) for x in range(n))
+            farthest = f"{self.pursuers} cells that far from any evader cell"
+        else:
+            span = n - self.physics.box_side / 2 - self.physics.evader_radius
+            room = self.pursuers if d <= span * 2**0.5 else 0
+            farthest = f"a pursuer farther than {span * 2**0.5:.3g} m from the evader"
+        if room < self.pursuers:
+            raise InvalidKey(
+                "start.min_evader_distance",
+                f"{d:g} leaves no valid random start (the {n}x{n} arena has no room for "
+                f"{farthest})",
             )
 
     @property

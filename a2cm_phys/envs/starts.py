@@ -18,7 +18,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from ..config import Scenario
+from ..config import ConfigError, Scenario
 from .core import default_start
 from .evaders.scripted import draws, mix64
 
@@ -71,8 +71,9 @@ def _candidates(scenario: Scenario, key: np.ndarray, attempt: int) -> np.ndarray
 
 def random_starts(scenario: Scenario, seeds: np.ndarray) -> np.ndarray:
     """Each episode seed's random start ``(B, N + 1, 2)``: cells (int64, grid) or metres
-    (float64, physics), pursuers first. Raises ``ValueError`` if a valid start is too rare
-    to be drawn (:meth:`~a2cm_phys.config.Scenario.validate` refuses most such games)."""
+    (float64, physics), pursuers first. Raises :class:`~a2cm_phys.config.ConfigError`
+    (naming ``start.min_evader_distance``) if a valid start is too rare to be drawn (physics
+    only: :meth:`~a2cm_phys.config.Scenario.validate` refuses every grid game without one)."""
     seeds = np.atleast_1d(np.asarray(seeds, dtype=np.uint64))
     grid = scenario.mode == "grid"
     out = np.zeros((len(seeds), scenario.pursuers + 1, 2), np.int64 if grid else np.float64)
@@ -87,9 +88,10 @@ def random_starts(scenario: Scenario, seeds: np.ndarray) -> np.ndarray:
         todo = todo[~ok]
         if not len(todo):
             return out
-    raise ValueError(
-        f"scenario '{scenario.name}': no valid random start found in {_ATTEMPTS:,} draws; "
-        f"lower start.min_evader_distance ({scenario.start.min_evader_distance:g})"
+    raise ConfigError(
+        f"scenario '{scenario.name}': key 'start.min_evader_distance': no valid random start "
+        f"found in {_ATTEMPTS:,} draws; lower start.min_evader_distance "
+        f"({scenario.start.min_evader_distance:g})"
     )
 
 
