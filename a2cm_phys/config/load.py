@@ -11,7 +11,7 @@ from typing import Any
 
 import tomllib
 
-from .parse import ConfigError, build, merge_overrides, to_dict
+from .parse import ConfigError, build, expand_shorthands, merge_overrides, to_dict
 from .resolve import CONTROL_DEFAULTS
 from .scenario import Scenario
 from .train import Train
@@ -80,9 +80,8 @@ def load_scenario(
         data, source = read_toml(path), str(path)
         data.setdefault("name", path.stem)
     if overrides:
-        # the file alone must be valid, and be blamed if not; its full form then takes the
-        # overrides, so that a dotted key reaches a table the file wrote short (start = "random")
-        data = to_dict(build(Scenario, data, source))
+        build(Scenario, data, source)  # the file alone must be valid, and be blamed if not
+        data = expand_shorthands(Scenario, data)  # not to_dict: defaults are resolved later
         data, source = merge_overrides(data, overrides), f"{source} (with overrides)"
     return build(Scenario, data, source)
 

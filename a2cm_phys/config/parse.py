@@ -68,6 +68,7 @@ def build(cls: type, data: Mapping[str, Any], source: str, prefix: str = "") -> 
 def _build(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
     if not isinstance(data, Mapping):
         raise InvalidKey(prefix.rstrip(".") or "<root>", f"expected a table, got {data!r}")
+    data = expand_shorthands(cls, data)
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     unknown = sorted(set(data) - set(fields))
@@ -78,12 +79,23 @@ def _build(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
     for name, value in data.items():
         key, hint = f"{prefix}{name}", hints[name]
         if dataclasses.is_dataclass(hint):
-            if isinstance(value, str) and hasattr(hint, "shorthand"):
-                value = {hint.shorthand: value}  # e.g. start = "random"
             kwargs[name] = _build(hint, value, f"{key}.")
         else:
             kwargs[name] = _coerce(value, hint, key)
     return cls(**kwargs)
+
+
+def expand_shorthands(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
+    """``data`` with every bare-string value of a table that has a shorthand written out as
+    that table (``start = "random"`` → ``start = {kind = "random"}``), defaults left unset,
+    so that a dotted override (``start.min_evader_distance``) has a table to reach."""
+    hints = typing.get_type_hints(cls)
+    out = dict(data)
+    for name, value in data.items():
+        hint = hints.get(name)
+        if dataclasses.is_dataclass(hint) and isinstance(value, str) and hasattr(hint, "shorthand"):
+            out[name] = {hint.shorthand: value}
+    return out
 
 
 _INTEGERS = (int, np.integer)
