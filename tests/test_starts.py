@@ -256,3 +256,16 @@ def test_a_physics_start_too_rare_to_draw_names_the_key_to_lower() -> None:
         load_scenario("phys_cont_random", {"start.min_evader_distance": 6.3})
     with pytest.raises(ConfigError, match=r"lower start\.min_evader_distance \(6\)"):
         random_starts(sc, np.arange(4, dtype=np.uint64))
+
+
+def test_overrides_reach_a_start_the_file_wrote_short(tmp_path) -> None:
+    """A dotted override reaches ``start = "random"``, and ``start = "random"`` as an
+    override keeps the file's other start keys."""
+    short = tmp_path / "short.toml"
+    short.write_text('start = "random"\n')
+    sc = load_scenario(short, {"start.min_evader_distance": 3})
+    assert (sc.start.kind, sc.start.min_evader_distance) == ("random", 3.0)
+    table = tmp_path / "table.toml"
+    table.write_text("[start]\nmin_evader_distance = 3\n")
+    sc = load_scenario(table, {"start": "random"})
+    assert (sc.start.kind, sc.start.min_evader_distance) == ("random", 3.0)

@@ -82,6 +82,7 @@ def load_scenario(
     if overrides:
         build(Scenario, data, source)  # the file alone must be valid, and be blamed if not
         data = expand_shorthands(Scenario, data)  # not to_dict: defaults are resolved later
+        overrides = expand_shorthands(Scenario, overrides)  # start = "random" keeps the rest
         data, source = merge_overrides(data, overrides), f"{source} (with overrides)"
     return build(Scenario, data, source)
 
