@@ -36,9 +36,10 @@ def _sighting(sc, rules: GridRules, cells: np.ndarray) -> int:
     return int(cells[-1]) if near.any() else -1
 
 
-def _play(sc, rules, pursuer_actions, evader_actions):
-    """Cells ``(T + 1, N + 1)`` of one game, and whether some step captured."""
-    cells = _start_cells(sc)[:, None]
+def _play(sc, rules, pursuer_actions, evader_actions, start=None):
+    """Cells ``(T + 1, N + 1)`` of one game from ``start`` (default: the fixed start), and
+    whether some step captured."""
+    cells = (_start_cells(sc) if start is None else np.asarray(start))[:, None]
     path, caught = [cells[:, 0]], False
     for a, m in zip(pursuer_actions, evader_actions, strict=True):
         cells, captured, _, _ = rules.apply(cells, np.asarray(a)[None], np.array([m]))
@@ -101,7 +102,7 @@ def test_the_filter_is_the_brute_force_posterior(size, pursuers, actions, radius
         pooled = pursuer_sightings(shared, _team_obs(shared, rules, paths[t]))
         np.testing.assert_array_equal(pooled[1], seen)  # share: the same pooled sightings
         if t == 0:
-            belief = filt.observe(filt.initial(len(games)), cells, seen)
+            belief = filt.observe(filt.initial(cells), cells, seen)
         else:
             belief = filt.update(belief, before, cells, seen)
         before = cells
@@ -110,6 +111,50 @@ def test_the_filter_is_the_brute_force_posterior(size, pursuers, actions, radius
             want = _posterior(sc, rules, acts[:t], sights)
             np.testing.assert_allclose(belief[g], want, rtol=0, atol=1e-12)
     assert (belief > 0).sum() > len(games)  # the beliefs spread: the test meant something
+
+
+@pytest.mark.parametrize(
+    ("size", "pursuers", "distance", "steps"), [(3, 1, 2, 3), (4, 2, 2, 3), (4, 1, 3, 3)]
+)
+def test_from_random_starts_the_filter_is_the_brute_force_posterior(
+    size, pursuers, distance, steps
+) -> None:
+    """From random starts the belief begins uniform over the evader's valid cells given the
+    pursuers' (the sampler is uniform over valid starts) and stays the exact posterior: the
+    sum over every valid evader start and every evader move sequence."""
+    sc = load_scenario(
+        "grid_pomdp_random",
+        {"size": size, "pursuers": pursuers, "start": {"min_evader_distance": distance}},
+    )
+    rules, filt, moves = GridRules(sc), EvaderFilter(sc), evader_moves(sc)
+    xy, rng, spread = rules.cell_xy, np.random.default_rng(size * 10 + pursuers), False
+    for _ in range(4):
+        placed = rng.choice(size * size, pursuers, replace=False)
+        far = np.abs(xy[:, None] - xy[placed][None]).sum(-1).min(-1) >= distance
+        starts = np.flatnonzero(far)  # the evader's valid cells given the pursuers'
+        acts = rng.integers(0, sc.actions, (steps, pursuers))
+        start = [*placed, rng.choice(starts)]
+        path, caught = _play(sc, rules, acts, rng.choice(moves, steps), start)
+        if caught:
+            continue
+        sights = [_sighting(sc, rules, c) for c in path]
+        belief = None
+        for t in range(steps + 1):
+            cells, seen = pursuer_sightings(sc, _team_obs(sc, rules, path[t][None]))
+            assert seen[0] == sights[t]
+            if t == 0:
+                belief = filt.observe(filt.initial(cells), cells, seen)
+            else:
+                belief = filt.update(belief, path[t - 1][None, :-1], cells, seen)
+            want = np.zeros(size * size)
+            for e0 in starts:
+                for seq in itertools.product(moves, repeat=t):
+                    p, c = _play(sc, rules, acts[:t], seq, [*placed, e0])
+                    if not c and [_sighting(sc, rules, x) for x in p] == sights[: t + 1]:
+                        want[p[-1, -1]] += len(moves) ** -t
+            np.testing.assert_allclose(belief[0], want / want.sum(), rtol=0, atol=1e-12)
+            spread |= np.count_nonzero(belief[0]) > 1
+    assert spread  # some belief was not a single cell: the start's uncertainty was tested
 
 
 def _direct_value(sc, sol, rules, pursuers: np.ndarray, belief: np.ndarray) -> np.ndarray:
@@ -187,7 +232,7 @@ def test_the_team_reads_only_what_the_pursuers_sense_and_forgets_ended_games() -
     for _ in range(150):
         cells, seen = pursuer_sightings(sc, obs)
         filt = honest.filter
-        want = filt.observe(filt.initial(8), cells, seen)  # a new episode: the known start
+        want = filt.observe(filt.initial(cells), cells, seen)  # a new episode: the known start
         if honest.belief is not None:
             going = filt.update(honest.belief, honest.cells, cells, seen)
             want[~ended] = going[~ended]
@@ -249,7 +294,7 @@ def test_on_grid_pomdp_the_team_never_loses_the_evader_so_qmdp_is_optimal() -> N
     filt, q = team.filter, team.values
     frontier, visited, steps = _start_cells(sc)[None], set(), 0
     cells, seen = pursuer_sightings(sc, _team_obs(sc, rules, frontier))
-    assert np.count_nonzero(filt.observe(filt.initial(1), cells, seen)) == 1
+    assert np.count_nonzero(filt.observe(filt.initial(cells), cells, seen)) == 1
     while len(frontier):
         frontier = np.array([s for s in frontier if tuple(s) not in visited]).reshape(-1, n + 1)
         visited.update(map(tuple, frontier))

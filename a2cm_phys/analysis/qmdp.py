@@ -1,9 +1,10 @@
 """``qmdp``: a belief-planning reference team for partially observed grids (SPEC §6b).
 
 Each step, every game's belief over the evader's cell is brought up to date by the Bayes
-filter (:class:`~a2cm_phys.solve.belief.EvaderFilter`: the known start, the evader's
-known move law, no capture, the pooled sightings), and the team takes the joint action
-that is best on average over the belief under the exact oracle's values (QMDP):
+filter (:class:`~a2cm_phys.solve.belief.EvaderFilter`: the known start or the start
+distribution, the evader's known move law, no capture, the pooled sightings), and the team
+takes the joint action that is best on average over the belief under the exact oracle's
+values (QMDP):
 
     a* = argmax_a Σ_e b(e) Q(p, e, a),   Q(s, a) = r(s, a) + E_evader[ going on · V(s') ]
 
@@ -120,11 +121,11 @@ class QMDPPolicy:
         cells, seen = pursuer_sightings(self.scenario, obs)
         b = len(cells)
         if self.belief is None or len(self.belief) != b:
-            self.belief = self.filter.initial(b)
+            self.belief = self.filter.initial(cells)
             self.cells, self.fresh = cells, np.ones(b, dtype=bool)
         prior = np.where(
             self.fresh[:, None],
-            self.filter.initial(b),
+            self.filter.initial(cells),
             self.filter.predict(self.belief, self.cells, cells),
         )
         self.belief = self.filter.observe(prior, cells, seen)

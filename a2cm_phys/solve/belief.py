@@ -1,8 +1,10 @@
 """A Bayes filter over the evader's cell for a team that senses it only up close (SPEC §6b).
 
 The belief of a game is a probability vector over the ``C = size²`` cells (cell
-``x + size · y``). It starts at the evader's known start cell (SPEC §2: the centre), and
-each step of the game updates it in three parts:
+``x + size · y``). It starts at the evader's known start cell (SPEC §2: the centre) or, from
+random starts, uniform over the cells the sampler could have put the evader on given the
+pursuers' cells (the sampler is uniform over valid starts, so the evader is uniform over
+its valid cells given the pursuers'), and each step of the game updates it in three parts:
 
 1. **predict** through the scripted evader's known move law: uniform over the scenario's
    ``actions`` (``random``) or always stay (``static``); a move off the arena leaves it on
@@ -88,14 +90,22 @@ class EvaderFilter:
         xy = rules.cell_xy
         cheb = np.abs(xy[:, None, :] - xy[None, :, :]).max(-1)
         self.near = cheb <= float(scenario.sensing.radius)  # (C, C): within the radius
+        self.manhattan = np.abs(xy[:, None, :] - xy[None, :, :]).sum(-1)  # (C, C)
         start = default_start(scenario.size, scenario.pursuers)[-1]
         self.start = int(start[0] + scenario.size * start[1])
 
-    def initial(self, batch: int) -> np.ndarray:
-        """Beliefs ``(batch, C)`` at an episode's start: the evader's known start cell."""
-        out = np.zeros((batch, self.n_cells))
-        out[:, self.start] = 1.0
-        return out
+    def initial(self, pursuers: np.ndarray) -> np.ndarray:
+        """Beliefs ``(B, C)`` at an episode's start, the pursuers at cells ``(B, N)``: the
+        evader's known start cell, or from random starts uniform over the cells at Manhattan
+        distance ``>= start.min_evader_distance`` from every pursuer (which no pursuer is on)."""
+        start = self.scenario.start
+        if not start.random:
+            out = np.zeros((len(pursuers), self.n_cells))
+            out[:, self.start] = 1.0
+            return out
+        far = self.manhattan[pursuers] >= max(start.min_evader_distance, 1)  # (B, N, C)
+        out = far.all(axis=1).astype(np.float64)
+        return out / out.sum(axis=1, keepdims=True)
 
     def predict(self, belief: np.ndarray, before: np.ndarray, after: np.ndarray) -> np.ndarray:
         """The beliefs after the evader's move, given that it met no pursuer moving from
