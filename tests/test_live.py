@@ -1,7 +1,8 @@
 """The live view (``train --live``) and ``replay --serve``: the Foxglove SDK's WebSocket
 server, watched by a real WebSocket client (``websockets``) speaking Foxglove's protocol
-(offered as ``foxglove.websocket.v1`` and ``foxglove.sdk.v1``, its new name, which the SDK
-picks); scenes decode with the schema the server advertises, curve points are JSON."""
+(offered as ``foxglove.websocket.v1`` and ``foxglove.sdk.v1``, its new name, which the relay
+in front of the SDK picks; either alone is accepted); scenes decode with the schema the
+server advertises, curve points are JSON."""
 
 from __future__ import annotations
 
@@ -56,9 +57,15 @@ class Received:
         return [(t, json.loads(d)) for t, d in self.messages.get(topic, [])]
 
 
-async def _watch(url: str, topics: list[str], seconds: float, done: Callable[[Received], bool]):
+async def _watch(
+    url: str,
+    topics: list[str],
+    seconds: float,
+    done: Callable[[Received], bool],
+    protocols: list[str],
+):
     got = Received()
-    async with websockets.connect(url, subprotocols=PROTOCOLS, max_size=None) as ws:
+    async with websockets.connect(url, subprotocols=protocols, max_size=None) as ws:
         got.protocol = ws.subprotocol
         while not set(topics) <= set(got.channels):
             msg = json.loads(await asyncio.wait_for(ws.recv(), 5))
@@ -78,10 +85,12 @@ async def _watch(url: str, topics: list[str], seconds: float, done: Callable[[Re
     return got
 
 
-def watch(url: str, topics: list[str], seconds: float, done=lambda got: False) -> Received:
-    """Connect to ``url``, subscribe to ``topics`` and collect for ``seconds`` (or until
-    ``done(received)``)."""
-    return asyncio.run(_watch(url, topics, seconds, done))
+def watch(
+    url: str, topics: list[str], seconds: float, done=lambda got: False, protocols=PROTOCOLS
+) -> Received:
+    """Connect to ``url`` offering ``protocols``, subscribe to ``topics`` and collect for
+    ``seconds`` (or until ``done(received)``)."""
+    return asyncio.run(_watch(url, topics, seconds, done, protocols))
 
 
 class Training:
@@ -148,6 +157,30 @@ def test_a_client_watches_scenes_and_the_curve_as_it_forms() -> None:
     assert ids == sorted(ids) and all(p["episodes"] <= LIVE_PLOT_EVERY for _, p in points)
     updates = got.json("/plot/update")
     assert updates and all(p["policy_loss"] == 0.5 and "entropy" not in p for _, p in updates)
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_either_name_of_the_protocol_is_accepted(protocol: str) -> None:
+    """A client offering only one name (the SDK itself accepts only ``foxglove.sdk.v1``)
+    is answered in that name and gets the same scenes."""
+    with LiveView.open(load_scenario("grid_collision"), "127.0.0.1", 0) as live, Training(live):
+        got = watch(
+            live.url, ["/scene"], 8, lambda g: len(g.messages.get("/scene", [])) >= 2, [protocol]
+        )
+    assert got.protocol == protocol
+    assert len(got.messages["/scene"]) >= 2
+    assert {e.id for e in got.decode_scene(got.messages["/scene"][0][1]).entities} >= {"evader"}
+
+
+def test_a_client_offering_neither_name_is_refused() -> None:
+    with LiveView.open(load_scenario("grid_collision"), "127.0.0.1", 0) as live:
+
+        async def offer_another() -> None:
+            async with websockets.connect(live.url, subprotocols=["foxglove.other.v9"]):
+                pass
+
+        with pytest.raises(websockets.exceptions.InvalidStatus, match="400"):
+            asyncio.run(offer_another())
 
 
 def test_a_stalled_client_never_holds_training_up() -> None:

@@ -6,20 +6,26 @@ are encoded by the SDK (``msg.encode()``: protobuf) and written through the ``mc
 under the SDK's own schema: name ``foxglove.SceneUpdate``, encoding ``protobuf``, data the
 SDK's ``FileDescriptorSet`` (:func:`register_scene_channel`). Foxglove reads them as its own.
 
-On the wire: :class:`FoxgloveServer` starts the SDK's WebSocket server (protocol
-``foxglove.sdk.v1``, Foxglove's new name for ``foxglove.websocket.v1``) in a context of its
-own, so that several servers (tests, a sweep's runs) never share channels. Its channels'
-``log`` never blocks: the SDK queues each client's messages on its own threads, dropping
-the oldest when a client falls behind.
+On the wire: :class:`FoxgloveServer` starts the SDK's WebSocket server in a context of its
+own, so that several servers (tests, a sweep's runs) never share channels, on the loopback
+interface behind a :class:`~a2cm_phys.record.relay.Relay` on the public address: the SDK
+accepts only the protocol name ``foxglove.sdk.v1``, the relay also Foxglove's older name
+``foxglove.websocket.v1`` (the same protocol), which Foxglove's own client library offers.
+Its channels' ``log`` never blocks: the SDK queues each client's messages on its own
+threads, dropping the oldest when a client falls behind.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import foxglove
+from foxglove.channels import SceneUpdateChannel
+from foxglove.messages import SceneUpdate
 from mcap.writer import Writer
 
 from ..base.errors import UserError
+from .relay import Relay
 from .schemas import schema_bytes
 
 DEFAULT_HOST, DEFAULT_PORT = "127.0.0.1", 8765
@@ -32,8 +38,6 @@ SCENE_SCHEMA_NAME = "foxglove.SceneUpdate"
 
 def scene_schema() -> tuple[str, str, bytes]:
     """``(name, encoding, data)`` of the SDK's ``foxglove.SceneUpdate`` schema."""
-    from foxglove.messages import SceneUpdate
-
     schema = SceneUpdate.get_schema()
     return schema.name, schema.encoding, bytes(schema.data)
 
@@ -63,27 +67,32 @@ def address(text: str | None, option: str) -> tuple[str, int]:
 
 
 class FoxgloveServer:
-    """The SDK's WebSocket server on ``host:port`` (port 0: any free one) with a context
-    of its own. A port that cannot be had (busy, or not ours to bind) is a
+    """The SDK's WebSocket server with a context of its own, reached through a relay on
+    ``host:port`` (port 0: any free one) that accepts both names of the protocol. A port
+    that cannot be had (busy, or not ours to bind) is a
     :class:`~a2cm_phys.base.errors.UserError` naming it. ``message_backlog`` is how many
     messages each client may fall behind before its oldest are dropped."""
 
     def __init__(self, host: str, port: int, name: str, message_backlog: int = 1024) -> None:
-        import foxglove
-
         self.context = foxglove.Context()
         try:
             self.server = foxglove.start_server(
                 name=name,
-                host=host,
-                port=port,
+                host="127.0.0.1",
+                port=0,
                 context=self.context,
                 message_backlog_size=message_backlog,
             )
         except (RuntimeError, OSError, ValueError, OverflowError) as err:
             reason = str(err).removeprefix("FoxgloveError: ")
+            raise UserError(f"cannot start the Foxglove server: {reason}") from None
+        try:
+            self.relay = Relay(host, port, f"ws://127.0.0.1:{self.server.port}")
+        except (OSError, ValueError, OverflowError) as err:
+            self.server.stop()
+            reason = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
             raise UserError(f"cannot serve Foxglove on {host}:{port}: {reason}") from None
-        self.host, self.port = host, self.server.port
+        self.host, self.port = host, self.relay.port
 
     @property
     def url(self) -> str:
@@ -92,15 +101,11 @@ class FoxgloveServer:
 
     def scene_channel(self, topic: str) -> Any:
         """A ``foxglove.SceneUpdate`` channel on ``topic`` (the SDK's typed channel)."""
-        from foxglove.channels import SceneUpdateChannel
-
         return SceneUpdateChannel(topic, context=self.context)
 
     def json_channel(self, topic: str, schema: dict[str, Any]) -> Any:
         """A JSON channel on ``topic`` with the JSON schema ``schema`` (named by its
         title), for messages given as encoded bytes."""
-        import foxglove
-
         sdk_schema = foxglove.Schema(
             name=schema["title"], encoding="jsonschema", data=schema_bytes(schema)
         )
@@ -109,5 +114,6 @@ class FoxgloveServer:
         )
 
     def close(self) -> None:
-        """Stop the server (clients are disconnected); idempotent."""
+        """Stop the relay and the server (clients are disconnected); idempotent."""
+        self.relay.close()
         self.server.stop()
