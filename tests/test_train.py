@@ -17,9 +17,12 @@ import torch
 
 from a2cm_phys.algos import NonFiniteLoss
 from a2cm_phys.algos.learner import Learner
+from a2cm_phys.commands.replay import main as replay_main
 from a2cm_phys.commands.train import EXIT_INTERRUPTED, EXIT_NONFINITE, main
 from a2cm_phys.config import load_scenario, load_train, preset, resolve_train, scenario_names
 from a2cm_phys.envs.vector import VectorEnv
+from a2cm_phys.record import read_run
+from a2cm_phys.record.verify import verify
 from a2cm_phys.training import checkpoint
 from a2cm_phys.training.trainer import Trainer
 
@@ -106,12 +109,56 @@ def test_interrupt_mid_rollout_rewinds_to_last_update(
 
 
 @pytest.mark.parametrize(
+    ("scenario", "stop_at"),
+    [
+        ("grid_collision", None),  # a checkpoint at an update's end
+        ("grid_collision", 8 * 6 + 3),  # a stop inside update 7's rollout: a rewind
+        pytest.param(
+            "phys_collision", 8 * 3 + 5, marks=pytest.mark.skipif(not HAS_PHYSICS, reason="pymunk")
+        ),
+    ],
+)
+def test_episodes_straddling_a_resume_keep_their_whole_trajectory(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys, scenario: str, stop_at: int | None
+) -> None:
+    """Every episode the summary counts has its trajectory and re-simulates, although many
+    were running when the run stopped (contact events and velocities too, in physics)."""
+    argv = ["--scenario", scenario, "--num-envs", "4", "--batch-size", "32", "--seed", "2"]
+    step, calls = VectorEnv.step, []
+
+    def interrupted_step(self: VectorEnv, *args: object, **kwargs: object) -> object:
+        calls.append(1)
+        if len(calls) == stop_at:
+            raise KeyboardInterrupt
+        return step(self, *args, **kwargs)
+
+    if stop_at is not None:
+        monkeypatch.setattr(VectorEnv, "step", interrupted_step)
+    first = 6 if stop_at is None else 12
+    code, run = _run(tmp_path, *argv, "--updates", str(first))
+    assert code == (0 if stop_at is None else EXIT_INTERRUPTED)
+    monkeypatch.setattr(VectorEnv, "step", step)
+    carried = checkpoint.load(run)["log"]["open"]
+    if scenario.startswith("phys"):
+        assert carried is None  # physics games restart on resume: nothing straddles
+    else:  # games caught mid-episode, with steps to carry
+        assert (carried["rows"]["lengths"] > 1).sum() >= 2
+    assert main(["--resume", str(run), "--updates", "12", "--no-progress"]) == 0
+    log = read_run(run)
+    summary = json.loads((run / "summary.json").read_text())
+    assert len(log.parts) == 2 and log.n_episodes == summary["episodes"]
+    capsys.readouterr()
+    assert verify(log) == 0
+    assert f"verify: {summary['episodes']} episodes" in capsys.readouterr().out
+    assert replay_main([str(run), "--verify"]) == 0
+
+
+@pytest.mark.parametrize(
     ("signum", "status"), [(signal.SIGINT, EXIT_INTERRUPTED), (signal.SIGTERM, 128 + 15)]
 )
 def test_sigint_or_sigterm_saves_checkpoint_closes_log_and_exits(
     tmp_path: Path, signum: int, status: int
 ) -> None:
-    from a2cm_phys.record import read_run
 
     cmd = [sys.executable, "-m", "a2cm_phys.train", *GRID, "--updates", "1000000"]
     cmd += ["--logdir", str(tmp_path), "--no-progress", "--checkpoint-every", "20"]
@@ -279,7 +326,6 @@ def test_a_resumed_run_continues_its_episode_log(tmp_path, monkeypatch):
     """Every episode of an interrupted and resumed run has a summary in the run's logs."""
     from a2cm_phys.analysis.run_series import log_files
     from a2cm_phys.commands.train import main as train_main
-    from a2cm_phys.record import read_run
     from a2cm_phys.training.trainer import Trainer
 
     original = Trainer._one_update

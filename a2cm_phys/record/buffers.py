@@ -85,6 +85,31 @@ class StepBuffers:
             if a is not None:
                 a[: last + 1 - first] = a[first : last + 1]
 
+    def open_rows(self, begin: np.ndarray, row: int) -> dict[str, np.ndarray]:
+        """Each game's rows from ``begin[game]`` (its running episode's start) to ``row``,
+        game after game, per field, with ``lengths`` (rows per game): what
+        :meth:`place_open` puts back."""
+        lengths = row + 1 - begin
+        rows = np.concatenate([np.arange(b, row + 1) for b in begin.tolist()])
+        games = np.repeat(np.arange(len(begin)), lengths)
+        out = {name: a[rows, games] for name in _FIELDS if (a := getattr(self, name)) is not None}
+        return {**out, "lengths": np.asarray(lengths, dtype=np.int64)}
+
+    def place_open(self, rows: dict[str, np.ndarray]) -> np.ndarray:
+        """Put back :meth:`open_rows`, each game's rows ending at the same last row
+        (``max(lengths) - 1``); the buffer row of each game's start. The buffers must have
+        a row more than that."""
+        lengths = rows["lengths"]
+        last = int(lengths.max()) - 1
+        begin = last + 1 - lengths
+        at = np.concatenate([np.arange(b, last + 1) for b in begin.tolist()])
+        games = np.repeat(np.arange(len(lengths)), lengths)
+        for name in _FIELDS:
+            a = getattr(self, name)
+            if a is not None:
+                a[at, games] = rows[name]
+        return begin
+
     def grow(self) -> None:
         """Double the number of rows (an episode longer than the buffers)."""
         for name in _FIELDS:

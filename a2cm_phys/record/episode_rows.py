@@ -5,6 +5,12 @@ Each vector step takes the next buffer row (:mod:`.buffers`); the episodes that 
 it are queued as a :class:`Finished` (their summaries and rows), and their games' next
 episodes begin at that row. When the buffers are full, the rows older than every running episode
 are dropped (after the queue has been written, since its episodes live in those rows).
+
+A resumed run's episodes that straddle the resume keep their whole trajectory: at every
+update's end (:meth:`EpisodeRows.mark`) the rows remember where each running episode
+began, the checkpoint carries those episodes' rows so far (:meth:`EpisodeRows.open_episodes`:
+as of the last mark, the state the checkpoint holds, even when a stop mid-rollout rewinds
+it), and the next session's rows start from them.
 """
 
 from __future__ import annotations
@@ -37,23 +43,58 @@ class EpisodeRows:
 
     The buffers start with room for two episodes of ``max_steps``, within bounds; an
     episode that fills them grows them, so memory follows the episodes that happen.
-    ``base`` is the log's clock (vector steps) at buffer row 0; it moves on as old rows are
-    dropped. Make it right after the env's reset (or at a resumed run's checkpoint).
+    ``base`` is the log's clock (vector steps) at the env's current state. Make it right
+    after the env's reset, or at a resumed run's checkpoint with the ``carried``
+    :meth:`open_episodes` the checkpoint holds (``None``: an older checkpoint, whose games
+    caught mid-episode get a summary but no trajectory).
     """
 
-    def __init__(self, vec_env: VectorEnv, max_steps: int, base: int) -> None:
-        self.buf = StepBuffers(vec_env, min(max(2048, 2 * (max_steps + 2)), 8192))
-        self.base = base
+    def __init__(
+        self, vec_env: VectorEnv, max_steps: int, base: int, carried: dict | None = None
+    ) -> None:
+        rows = min(max(2048, 2 * (max_steps + 2)), 8192)
+        if carried is not None and not _matches(carried, vec_env, base):
+            carried = None
+        if carried is not None:
+            rows = max(rows, 2 * int(carried["rows"]["lengths"].max()))
+        self.buf = StepBuffers(vec_env, rows)
         self._vec = vec_env
         b = vec_env.num_envs
-        self._events: list[list] = [[] for _ in range(b)]
-        self._begin = np.zeros(b, dtype=np.int64)  # buffer row of each game's episode start
-        # Games already inside an episode (a resumed run): their first steps are not ours to
-        # log, so those episodes get a summary but no trajectory.
-        t = np.asarray(getattr(vec_env.core, "t", 0))
-        self._partial = {int(i) for i in np.flatnonzero(t > 0)}
-        self._row = 0  # last buffer row written
         self._queue: list[Finished] = []
+        if carried is None:
+            self.base = base  # the log's clock at buffer row 0; moves on as rows are dropped
+            self._events: list[list] = [[] for _ in range(b)]
+            self._begin = np.zeros(b, dtype=np.int64)  # buffer row of each game's episode start
+            self._row = 0  # last buffer row written
+            # games already inside an episode whose first steps no checkpoint carried
+            t = np.asarray(getattr(vec_env.core, "t", 0))
+            self._partial = {int(i) for i in np.flatnonzero(t > 0)}
+        else:
+            self._begin = self.buf.place_open(carried["rows"])
+            self._row = int(carried["rows"]["lengths"].max()) - 1
+            self.base = base - self._row
+            self._events = [list(e) for e in carried["events"]]
+            self._partial = {int(g) for g in carried["partial"]}
+        self.mark()
+
+    def mark(self) -> None:
+        """Remember the running episodes as they stand (at an update's end): what
+        :meth:`open_episodes` returns until the next mark."""
+        events = [(e, len(e)) for e in self._events]
+        self._mark = (self._row, self._begin.copy(), events, frozenset(self._partial))
+
+    def open_episodes(self) -> dict:
+        """The running episodes as of the last :meth:`mark`, for a checkpoint: each game's
+        rows since its episode's start (:meth:`StepBuffers.open_rows`), its contact events
+        so far, the games whose episode started before the log did (``partial``), and the
+        log's clock at the mark (``step``). Plain arrays, lists and numbers."""
+        row, begin, events, partial = self._mark
+        return {
+            "rows": self.buf.open_rows(begin, row),
+            "events": [[tuple(ev) for ev in e[:n]] for e, n in events],
+            "partial": sorted(partial),
+            "step": int(self.base + row),
+        }
 
     @property
     def full(self) -> bool:
@@ -95,10 +136,24 @@ class EpisodeRows:
     def compact(self) -> None:
         """Drop the rows older than every running episode (the queue must be empty), and
         grow the buffers if an episode fills them on its own."""
-        first = int(self._begin.min())
+        row, begin, events, partial = self._mark  # the mark's episodes began no later
+        first = int(begin.min())
         self.buf.keep(first, self._row)
         self._begin -= first
         self._row -= first
         self.base += first
+        self._mark = (row - first, begin - first, events, partial)
         if self._row + 1 >= self.buf.rows:  # an episode longer than the buffer: grow it
             self.buf.grow()
+
+
+def _matches(carried: dict, vec_env: VectorEnv, step: int) -> bool:
+    """Whether ``carried`` open episodes end where ``vec_env`` stands at log clock ``step``
+    (a checkpoint whose games all restarted carries none that match)."""
+    rows = carried["rows"]
+    lengths = rows["lengths"]
+    if carried["step"] != step or len(lengths) != vec_env.num_envs:
+        return False
+    last = np.cumsum(lengths) - 1  # each game's last carried row
+    now = np.where((lengths == 1)[:, None, None], rows["spos"][last], rows["pos"][last])
+    return bool(np.array_equal(now, vec_env.core.positions()))

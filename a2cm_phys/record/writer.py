@@ -41,8 +41,10 @@ class EpisodeRecorder:
     ``foxglove.SceneUpdate`` frames of every ``scene_every``-th, a learning-curve point per
     ``plot_every`` (:data:`.schemas.PLOT_EVERY`) and each update's plot point (0: none).
     ``metadata`` (JSON-able, the training config under ``"train"``) is stored with the
-    scenario, version and command line. Episodes running at ``close`` are not logged; a
-    resumed run passes ``start(…, step=…, episode=…)`` to continue its log's clocks.
+    scenario, version and command line. Episodes running at ``close`` are not logged here;
+    a checkpoint carries them (:meth:`open_episodes`, as of the last update's end) and a
+    resumed run passes ``start(…, step=…, episode=…, carried=…)`` to continue its log's
+    clocks and those episodes' trajectories.
     """
 
     def __init__(
@@ -74,16 +76,23 @@ class EpisodeRecorder:
         self._steps = 0  # vector steps so far: the log's clock
 
     def start(
-        self, vec_env: VectorEnv, obs: np.ndarray | None = None, step: int = 0, episode: int = 0
+        self,
+        vec_env: VectorEnv,
+        obs: np.ndarray | None = None,
+        step: int = 0,
+        episode: int = 0,
+        carried: dict | None = None,
     ) -> None:
         """Begin recording ``vec_env`` right after its ``reset`` (``obs`` is not needed).
 
         ``step`` (vector steps) and ``episode`` (episodes finished) start the log's clock
         and episode ids where a resumed run's previous log stopped; 0 for a new run.
+        ``carried``: the checkpoint's :meth:`open_episodes`, so that the episodes running
+        at the checkpoint are logged whole when they finish.
         """
         self._vec = vec_env
         self._steps, self._finished = int(step), int(episode)
-        self._rows = EpisodeRows(vec_env, self.scenario.max_steps, base=self._steps)
+        self._rows = EpisodeRows(vec_env, self.scenario.max_steps, self._steps, carried)
         self._encoder.start(self._finished, vec_env.learned_evader)
         self._rate = StepRate(self._steps)
 
@@ -119,6 +128,8 @@ class EpisodeRecorder:
         ``exploit_worst_case``, see :data:`.schemas.SPARSE_METRICS`) is logged where given."""
         if self._file.closed:
             raise RuntimeError("EpisodeRecorder.record_update after close()")
+        if self._rows is not None:
+            self._rows.mark()  # an update's end: where a checkpoint (or a rewind) stands
         b = self._vec.num_envs if self._vec is not None else 0
         rate = self._rate.measure(self._steps, b) if self._vec is not None else None
         msgs = update_messages(update, metrics, self._steps * b, self._finished, rate)
@@ -162,6 +173,11 @@ class EpisodeRecorder:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def open_episodes(self) -> dict | None:
+        """The episodes running at the last update's end, with their rows so far, for a
+        checkpoint (see :mod:`.episode_rows`); ``None`` before :meth:`start`."""
+        return None if self._rows is None else self._rows.open_episodes()
 
     @property
     def episodes(self) -> int:

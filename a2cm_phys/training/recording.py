@@ -24,7 +24,7 @@ def open_recorder(run: RunState) -> EpisodeRecorder:
     # A resumed session continues the log in a file of its own (an earlier one may have been
     # cut short by a crash, or got ahead of the checkpoint), on the same clock and episode
     # ids; readers let each part supersede what earlier parts logged from its start on. The
-    # games caught mid-episode get a summary without a trajectory.
+    # episodes running at the checkpoint continue from the steps it carried.
     step = run.update * run.cfg.steps_per_env
     path, session = new_part(run.run_dir, run.update)
     part = {
@@ -41,7 +41,9 @@ def open_recorder(run: RunState) -> EpisodeRecorder:
         log_every=run.log_every,
         scene_every=run.scene_every,
     )
-    recorder.start(run.env, run.obs, step=step, episode=run.stats.episodes)
+    recorder.start(
+        run.env, run.obs, step=step, episode=run.stats.episodes, carried=run.open_episodes
+    )
     return recorder
 
 

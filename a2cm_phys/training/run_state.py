@@ -20,6 +20,10 @@ from .state import ROLLOUT, RunState
 def capture(run: RunState) -> dict[str, Any]:
     """Everything a resume needs, as a dict for :func:`a2cm_phys.training.checkpoint.save`."""
     recorder = run.recorder
+    env = run.env.state()
+    # the episodes running now, with their steps so far, logged whole after a resume (none
+    # where the env's games restart on resume: physics)
+    carried = None if recorder is None or env.get("core") is None else recorder.open_episodes()
     return {
         "scenario": to_dict(run.scenario),
         "train": to_dict(run.cfg),
@@ -29,7 +33,7 @@ def capture(run: RunState) -> dict[str, Any]:
         "rng": run.rng.bit_generator.state,
         "pool": None if run.pool is None else run.pool.state_dict(),
         "descent": None if run.descent is None else run.descent.state_dict(),
-        "env": run.env.state(),
+        "env": env,
         "stats": run.stats.state(),
         "wall_time": run.wall_time(),
         "memory": _memories(run, lambda team: team.policy.start(len(team.batch["memory"]))),
@@ -40,6 +44,7 @@ def capture(run: RunState) -> dict[str, Any]:
             "scene_every": run.scene_every,
             "part": None if recorder is None else recorder.path.name,
             "episodes": run.stats.episodes,
+            "open": carried,
         },
     }
 
@@ -60,6 +65,7 @@ def restore(run: RunState, state: dict[str, Any]) -> None:
     run.clock.resume(float(state["wall_time"]))
     memory = state.get("memory") or {}
     fresh = state["env"].get("core") is None  # every game restarted: nothing to remember
+    run.open_episodes = None if fresh else state.get("log", {}).get("open")
     for team in (run.pursuers, run.evader):
         if team is not None and team.model.recurrent:
             kept = np.asarray(memory[team.name], dtype=np.float32)

@@ -111,6 +111,9 @@ class RunState:
     boundary: UpdateBoundary
     recorder: Any
     """The episode recorder while a session records (``None`` otherwise)."""
+    open_episodes: dict | None
+    """The episodes a resumed checkpoint carried, running, with their steps so far (for the
+    recorder: :meth:`~a2cm_phys.record.writer.EpisodeRecorder.open_episodes`)."""
     signals: StopSignals | None
     """The stop signals while a session runs."""
     resume_note: str | None

@@ -104,6 +104,7 @@ class Trainer(RunState):
         self.last_save = time.perf_counter()
         self.boundary = UpdateBoundary()
         self.recorder: Any = None  # the episode recorder while run() records
+        self.open_episodes: dict | None = None  # set by resume(): running episodes carried
         self.signals: StopSignals | None = None  # the stop signals while run() runs
         self.resume_note: str | None = None  # set by resume() when it fell back
 
