@@ -2,7 +2,7 @@
 
     python benchmarks/bench_pomdp.py [--scenarios grid_pomdp,grid_pomdp_share,phys_cont_pomdp]
         [--algos a2cm,a2c] [--seeds 5] [--episodes 5000] [--jobs 2] [--out FILE]
-        [--set train.KEY=VALUE ...] [--cost-only]
+        [--set train.KEY=VALUE ...] [--cost-only] [--no-references]
 
 For each scenario, algorithm and seed it trains a memoryless team (``recurrent = "none"``)
 and a recurrent one (``"gru"``) with the run's defaults (no episode log), then plays each
@@ -12,7 +12,14 @@ the end gives per scenario and algorithm the median capture steps of the memoryl
 the recurrent teams, their ratio (the issue's target: ≤ 0.85), and the references over the
 same number of episodes: the full-observation optimum (grids: the exact oracle of the game
 without sensing), the belief planner ``qmdp`` (grids), ``search`` and the full-observation
-``pursuit`` (continuous control).
+``pursuit`` (continuous control), each where it can be computed (``qmdp`` needs the dense
+oracle: up to 8×8 with 3 pursuers).
+
+How often the team is blind: every played team (and reference) counts the steps at which no
+pursuer senses the evader (the mask bits of the observation it acts on, pooled over the
+pursuers whatever ``sensing.share``), as a share of all steps ("blind"), and the mean length
+of a spell without sight ("spell", in steps). Memory can pay only where the team is blind
+often and for long.
 
 Training cost: the median time of one learner update (recurrent and feed-forward, on the
 same rollout batch, 20 repeats, interleaved) per 1,000 steps, and each run's wall time per
@@ -35,14 +42,53 @@ import torch
 from a2cm_phys.algos import Learner, make_model
 from a2cm_phys.analysis.evaluation import optimum, play
 from a2cm_phys.analysis.policies import pursuer_policy
-from a2cm_phys.config import load_scenario, load_train, resolve_train
+from a2cm_phys.config import ConfigError, Scenario, load_scenario, load_train, resolve_train
 from a2cm_phys.config.parse import parse_assignments
+from a2cm_phys.envs.sensing import agent_slice, features
 from a2cm_phys.envs.vector import VectorEnv
-from a2cm_phys.training.rollout import allocate_batch, collect
+from a2cm_phys.training.rollout import Policy, allocate_batch, collect, episodes_ended
 from a2cm_phys.training.runs import model_policy
 from a2cm_phys.training.trainer import Trainer
 
 KINDS = ("none", "gru")
+
+
+class SightCount:
+    """A pursuer policy, unchanged, that counts the steps at which no pursuer senses the
+    evader (from the observation it is given) and the spells without sight."""
+
+    def __init__(self, scenario: Scenario, policy: Policy) -> None:
+        k, n = features(scenario), scenario.pursuers
+        # each pursuer's mask bit for the evader, the last of its "others" (SPEC §6b)
+        self.columns = [agent_slice(scenario, i).start + k + (n - 1) * (1 + k) for i in range(n)]
+        self.policy, self.steps, self.blind = policy, 0, 0
+        self.spells: list[int] = []
+        self.run: np.ndarray | None = None
+
+    def __call__(self, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        blind = ~(obs[:, self.columns] > 0.5).any(axis=1)
+        if self.run is None:
+            self.run = np.zeros(len(obs), dtype=np.int64)
+        self.steps, self.blind = self.steps + len(obs), self.blind + int(blind.sum())
+        self._close(~blind)
+        self.run[blind] += 1
+        return self.policy(obs, rng)
+
+    def _close(self, games: np.ndarray) -> None:
+        """End the spells of ``games`` (bool) that are running."""
+        done = games & (self.run > 0)
+        self.spells.extend(self.run[done].tolist())
+        self.run[done] = 0
+
+    def episodes_ended(self, ended: np.ndarray) -> None:
+        """Spells end with the episode; the wrapped policy forgets as it would."""
+        self._close(ended)
+        episodes_ended(self.policy, ended)
+
+    def figures(self) -> dict[str, float]:
+        """``blind``: the share of steps without sight; ``spell``: a spell's mean length."""
+        spell = float(np.mean(self.spells)) if self.spells else 0.0
+        return {"blind": self.blind / max(self.steps, 1), "spell": spell}
 
 
 def run_one(job: dict) -> dict:
@@ -61,11 +107,12 @@ def run_one(job: dict) -> dict:
     if status != "done":
         raise RuntimeError(f"{job}: the run ended with {status}")
     steps = cfg.updates * cfg.batch_size
-    policy = model_policy(trainer.model, greedy=True)
+    policy = SightCount(sc, model_policy(trainer.model, greedy=True))
     result = play(sc, policy, job["episodes"], 16, 1000 + job["seed"])
     return {
         **{k: job[k] for k in ("scenario", "algo", "recurrent", "seed", "episodes")},
         "mean_steps": float(result.lengths.mean()),
+        **policy.figures(),
         "capture_rate": float(result.captured.mean()),
         "collisions": float(result.collisions.mean()),
         "train_seconds": seconds,
@@ -73,12 +120,33 @@ def run_one(job: dict) -> dict:
     }
 
 
-def reference(name: str, scenario: str, episodes: int) -> float:
-    """Mean capture steps of the pursuer policy ``name`` over ``episodes`` greedy episodes."""
+def reference(name: str, scenario: str, episodes: int) -> dict[str, float] | None:
+    """Mean capture steps (``steps``) of the pursuer policy ``name`` over ``episodes``
+    greedy episodes, and where it senses its blind figures (:class:`SightCount`); ``None``
+    where the policy cannot be built for the scenario (``qmdp`` beyond the dense oracle)."""
     sc = load_scenario(scenario)
     if name == "optimum":
-        return float(optimum(sc)["capture_steps"])
-    return float(play(sc, pursuer_policy(name, sc), episodes, 16, 1000).lengths.mean())
+        return {"steps": float(optimum(sc)["capture_steps"])}
+    try:
+        policy = pursuer_policy(name, sc)
+    except ConfigError as err:
+        print(f"{scenario}: no {name} reference ({err})", flush=True)
+        return None
+    if sc.sensing.on:
+        policy = SightCount(sc, policy)
+    steps = float(play(sc, policy, episodes, 16, 1000).lengths.mean())
+    return {"steps": steps, **(policy.figures() if sc.sensing.on else {})}
+
+
+def _reference_text(figures: dict[str, dict[str, float] | None]) -> str:
+    """``name steps (blind share, spell)`` per reference, comma-separated."""
+    parts = []
+    for name, got in figures.items():
+        if got is None:
+            continue
+        blind = f" (blind {got['blind']:.1%}, spell {got['spell']:.1f})" if "blind" in got else ""
+        parts.append(f"{name} {got['steps']:.3f}{blind}")
+    return ", ".join(parts)
 
 
 def update_cost(scenario: str, train: dict, repeats: int = 20) -> dict[str, float]:
@@ -115,15 +183,16 @@ def update_cost(scenario: str, train: dict, repeats: int = 20) -> dict[str, floa
 
 def _median_of(rows: list[dict], key: str, **match) -> tuple[float, float, float, int] | None:
     """``(median, min, max, n)`` of ``key`` over the rows matching ``match``."""
-    got = [r[key] for r in rows if all(r[k] == v for k, v in match.items())]
+    got = [r[key] for r in rows if key in r and all(r[k] == v for k, v in match.items())]
     return (statistics.median(got), min(got), max(got), len(got)) if got else None
 
 
 def _table(rows: list[dict], refs: dict, costs: dict) -> str:
     """The results as two markdown tables: capture steps, then training cost."""
     out = [
-        "| scenario | algo | memoryless | recurrent | ratio | seeds | references |",
-        "|---|---|---|---|---|---|---|",
+        "| scenario | algo | memoryless | recurrent | ratio | seeds | blind, spell"
+        " (memoryless / recurrent) | references |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for scenario, algo in sorted({(r["scenario"], r["algo"]) for r in rows}):
         med = {
@@ -134,9 +203,15 @@ def _table(rows: list[dict], refs: dict, costs: dict) -> str:
         ratio = f"{gru[0] / none[0]:.3f}" if none and gru else "—"
         cells = [f"{m[0]:.3f} ({m[1]:.2f}–{m[2]:.2f})" if m else "—" for m in (none, gru)]
         seeds = "/".join(str(m[3]) if m else "0" for m in (none, gru))
-        ref = ", ".join(f"{k} {v:.3f}" for k, v in refs.get(scenario, {}).items())
+        sight = []
+        for kind in KINDS:
+            match = {"scenario": scenario, "algo": algo, "recurrent": kind}
+            blind, spell = (_median_of(rows, key, **match) for key in ("blind", "spell"))
+            sight.append(f"{blind[0]:.1%}, {spell[0]:.1f}" if blind and spell else "—")
+        ref = _reference_text(refs.get(scenario, {}))
         out.append(
-            f"| `{scenario}` | {algo} | {cells[0]} | {cells[1]} | {ratio} | {seeds} | {ref} |"
+            f"| `{scenario}` | {algo} | {cells[0]} | {cells[1]} | {ratio} | {seeds}"
+            f" | {' / '.join(sight)} | {ref} |"
         )
     out += [
         "",
@@ -157,7 +232,14 @@ def _table(rows: list[dict], refs: dict, costs: dict) -> str:
 
 
 REFERENCES = {"grid": ("qmdp",), "physics": ("search",)}
-FULL_VIEW = {"grid_pomdp": "grid", "grid_pomdp_share": "grid", "phys_cont_pomdp": "phys_cont"}
+FULL_VIEW = {  # the same game seen whole; grids' optimum is the oracle's on the grid twin anyway
+    "grid_pomdp": "grid",
+    "grid_pomdp_share": "grid",
+    "grid_pomdp_random": "grid_random",
+    "grid9_pomdp_random": "grid9_pomdp_random",
+    "phys_cont_pomdp": "phys_cont",
+    "phys_cont_pomdp_random": "phys_cont_random",
+}
 
 
 def main() -> None:
@@ -195,7 +277,7 @@ def main() -> None:
                 print(json.dumps(row), flush=True)
     rows = [json.loads(line) for line in out.read_text().splitlines()] if out.exists() else []
     rows = [r for r in rows if r["scenario"] in scenarios]
-    refs: dict[str, dict[str, float]] = {}
+    refs: dict[str, dict[str, dict[str, float] | None]] = {}
     if not args.no_references:
         for s in scenarios:
             mode = load_scenario(s).mode
