@@ -182,6 +182,14 @@ def _add_run_flags(p: argparse.ArgumentParser) -> None:
         " curve (default: off; given alone, 127.0.0.1:8765, local only unless a host is"
         " named)",
     )
+    p.add_argument(
+        "--logger",
+        action="append",
+        choices=("tensorboard", "wandb", "csv"),  # training.loggers.LOGGERS, not imported
+        default=[],
+        help="also log the updates' metrics and the learning curve to TensorBoard, Weights &"
+        " Biases (offline) or CSV files, in RUN_DIR; may be repeated (default: none)",
+    )
 
 
 def check_new_run_dir(run_dir: Path) -> None:
@@ -210,6 +218,27 @@ def _check_run_files(run_dir: Path) -> None:
             raise UsageError(f"--resume {run_dir}: {path} is not a file (move it away)")
 
 
+def _resume_dir(args: argparse.Namespace) -> Path:
+    """The run directory ``--resume`` names, checked: it holds a run, and no option that
+    cannot change is given (a :class:`UsageError` otherwise)."""
+    fixed = [f"--{k.replace('_', '-')}" for k in _TRAIN_FLAGS if k != "updates"]
+    given = [f for f in fixed if getattr(args, f[2:].replace("-", "_")) is not None]
+    given += ["--scenario"] * bool(args.scenario) + ["--set"] * bool(args.set)
+    given += ["--run-dir"] * bool(args.run_dir) + ["--preset"] * (args.preset is not None)
+    if given:
+        raise UsageError(f"--resume: {', '.join(given)} cannot change when resuming")
+    run = Path(args.resume)
+    run_dir = run if run.is_dir() else run.parent
+    if not run_dir.is_dir():
+        raise UsageError(f"--resume {run}: no such run directory")
+    if run.is_file() and run.name != CHECKPOINT_NAME:
+        raise UsageError(f"--resume {run}: not a run directory or its {CHECKPOINT_NAME}")
+    if not any((run_dir / n).is_file() for n in (CONFIG_NAME, CHECKPOINT_NAME, PREVIOUS_NAME)):
+        raise UsageError(f"--resume {run_dir}: no checkpoint (and no config.json): not a run")
+    writable_dir(run_dir, "--resume")
+    return run_dir
+
+
 def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Trainer:
     """The trainer of a new or resumed run, with the run's lock entered into ``held``."""
     from ..training.trainer import Trainer
@@ -217,23 +246,10 @@ def _open_run(args: argparse.Namespace, command: str, held: ExitStack) -> Traine
     options = {
         "checkpoint_every": args.checkpoint_every,
         "progress": not args.no_progress,  # a bar on a terminal, plain lines elsewhere
+        "loggers": args.logger,  # a library not installed fails before the games start
     }
     if args.resume:
-        fixed = [f"--{k.replace('_', '-')}" for k in _TRAIN_FLAGS if k != "updates"]
-        given = [f for f in fixed if getattr(args, f[2:].replace("-", "_")) is not None]
-        given += ["--scenario"] * bool(args.scenario) + ["--set"] * bool(args.set)
-        given += ["--run-dir"] * bool(args.run_dir) + ["--preset"] * (args.preset is not None)
-        if given:
-            raise UsageError(f"--resume: {', '.join(given)} cannot change when resuming")
-        run = Path(args.resume)
-        run_dir = run if run.is_dir() else run.parent
-        if not run_dir.is_dir():
-            raise UsageError(f"--resume {run}: no such run directory")
-        if run.is_file() and run.name != CHECKPOINT_NAME:
-            raise UsageError(f"--resume {run}: not a run directory or its {CHECKPOINT_NAME}")
-        if not any((run_dir / n).is_file() for n in (CONFIG_NAME, CHECKPOINT_NAME, PREVIOUS_NAME)):
-            raise UsageError(f"--resume {run_dir}: no checkpoint (and no config.json): not a run")
-        writable_dir(run_dir, "--resume")
+        run_dir = _resume_dir(args)
         held.enter_context(run_lock(run_dir))
         remove_stray_temps(run_dir)
         _check_run_files(run_dir)

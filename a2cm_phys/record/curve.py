@@ -11,12 +11,15 @@ finished; the group still open when writing stops is written as it is (:meth:`re
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import orjson
 
 from ..config import Scenario
+
+if TYPE_CHECKING:
+    from ..envs.tallies import EpisodeBatch
 
 _COLUMNS = (
     "length",
@@ -107,6 +110,23 @@ class EpisodeCurve:
             wall_contacts=walls,
         )
         return orjson.dumps(doc)
+
+
+def episode_columns(eps: EpisodeBatch, learned: bool) -> dict[str, np.ndarray]:
+    """The columns of finished episodes ``eps`` as :meth:`EpisodeCurve.add` takes them (with
+    ``learned``: the evader's return too)."""
+    columns = {
+        "length": eps.length,
+        "return": eps.ret,
+        "captured": eps.captured,
+        "collision_terminated": eps.collision_terminated,
+        "truncated": eps.truncated,
+        "collisions": eps.collisions,
+        "wall_contacts": eps.wall_contacts,
+    }
+    if learned:
+        columns["evader_return"] = eps.evader_ret
+    return columns
 
 
 def update_point(doc: dict[str, Any]) -> bytes:

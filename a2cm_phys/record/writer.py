@@ -41,10 +41,8 @@ class EpisodeRecorder:
     ``foxglove.SceneUpdate`` frames of every ``scene_every``-th, a learning-curve point per
     ``plot_every`` (:data:`.schemas.PLOT_EVERY`) and each update's plot point (0: none).
     ``metadata`` (JSON-able, the training config under ``"train"``) is stored with the
-    scenario, version and command line. Episodes running at ``close`` are not logged here;
-    a checkpoint carries them (:meth:`open_episodes`, as of the last update's end) and a
-    resumed run passes ``start(…, step=…, episode=…, carried=…)`` to continue its log's
-    clocks and those episodes' trajectories.
+    scenario, version and command line. Episodes running at ``close`` are carried by the
+    checkpoint (:meth:`open_episodes`) into the resumed run's ``start(…, carried=…)``.
     """
 
     def __init__(
@@ -76,34 +74,24 @@ class EpisodeRecorder:
         self._steps = 0  # vector steps so far: the log's clock
 
     def start(
-        self,
-        vec_env: VectorEnv,
-        obs: np.ndarray | None = None,
-        step: int = 0,
-        episode: int = 0,
+        self, vec_env: VectorEnv, obs: Any = None, step: int = 0, episode: int = 0,
         carried: dict | None = None,
-    ) -> None:
+    ) -> None:  # fmt: skip
         """Begin recording ``vec_env`` right after its ``reset`` (``obs`` is not needed).
-
         ``step`` (vector steps) and ``episode`` (episodes finished) start the log's clock
-        and episode ids where a resumed run's previous log stopped; 0 for a new run.
-        ``carried``: the checkpoint's :meth:`open_episodes`, so that the episodes running
-        at the checkpoint are logged whole when they finish.
-        """
+        and ids where a resumed run's log stopped (0: a new run); ``carried``: the
+        checkpoint's :meth:`open_episodes`, logged whole when they finish."""
         self._vec = vec_env
         self._steps, self._finished = int(step), int(episode)
         self._rows = EpisodeRows(vec_env, self.scenario.max_steps, self._steps, carried)
         self._encoder.start(self._finished, vec_env.learned_evader)
         self._rate = StepRate(self._steps)
 
-    def record_step(
-        self, actions: np.ndarray, step: VecStep, episode_seeds_before: np.ndarray | None = None
-    ) -> None:
+    def record_step(self, actions: np.ndarray, step: VecStep) -> None:
         """Record one vector step: the pursuers' ``actions`` ``(B, N)`` (``(B, N, 2)``
         commands) as passed to ``vec_env.step`` and the :class:`VecStep` it returned, which
-        holds the evader's actions, learned or scripted. (``episode_seeds_before`` is
-        accepted but not needed: each finished episode's summary carries its seed.) A failed
-        write raises an ``OSError`` naming the log's file."""
+        holds the evader's actions, learned or scripted. A failed write raises an
+        ``OSError`` naming the log's file."""
         rows = self._rows
         if rows is None or self._file.closed:
             raise RuntimeError("EpisodeRecorder.record_step before start() or after close()")
@@ -120,12 +108,10 @@ class EpisodeRecorder:
             raise self._file.named(err) from None
 
     def record_update(self, update: int, metrics: dict[str, Any]) -> None:
-        """Log one learner update's ``metrics`` (e.g. ``policy_loss``, ``value_loss``,
-        ``entropy``, ``mean_advantage``, ``grad_norm``, ``steps_per_s``) at the current time,
-        with the counters ``update``, ``env_steps`` and ``episodes``; ``steps_per_s`` (wall
-        clock, since the previous update) is added unless ``metrics`` has it. Keys may vary
-        from update to update: a metric computed every K updates only (such as
-        ``exploit_worst_case``, see :data:`.schemas.SPARSE_METRICS`) is logged where given."""
+        """Log one learner update's ``metrics`` (``policy_loss``, ``entropy``, …) at the
+        current time with the counters ``update``, ``env_steps`` and ``episodes``, and
+        ``steps_per_s`` (since the previous update) unless given; keys may vary (sparse
+        ones, :data:`.schemas.SPARSE_METRICS`, are logged where given)."""
         if self._file.closed:
             raise RuntimeError("EpisodeRecorder.record_update after close()")
         if self._rows is not None:
@@ -142,9 +128,8 @@ class EpisodeRecorder:
             self.flush()
 
     def flush(self, durable: bool = False) -> None:
-        """Write the finished episodes and close the chunk, so that a killed process cannot
-        lose them; with ``durable``, also ``fsync`` the file, so that a crash of the machine
-        cannot either (the trainer does this before each checkpoint)."""
+        """Write the finished episodes and close the chunk (a killed process cannot lose
+        them); ``durable``: also ``fsync`` (the trainer's before each checkpoint)."""
         try:
             self._encode_pending()
             self._file.close_chunk(durable)
@@ -164,8 +149,7 @@ class EpisodeRecorder:
         self._file.close()
 
     def abandon(self) -> None:
-        """Close the file as it is, without writing anything more (after a failed write:
-        readers take every complete chunk before the failure)."""
+        """Close the file as it is, writing nothing more (after a failed write)."""
         self._file.abandon()
 
     def __enter__(self) -> EpisodeRecorder:
@@ -175,8 +159,8 @@ class EpisodeRecorder:
         self.close()
 
     def open_episodes(self) -> dict | None:
-        """The episodes running at the last update's end, with their rows so far, for a
-        checkpoint (see :mod:`.episode_rows`); ``None`` before :meth:`start`."""
+        """The episodes running at the last update's end, for a checkpoint (``None`` before
+        :meth:`start`; see :mod:`.episode_rows`)."""
         return None if self._rows is None else self._rows.open_episodes()
 
     @property

@@ -27,7 +27,7 @@ import numpy as np
 from ..config import Scenario
 from ..envs.tallies import EpisodeBatch
 from ..envs.vector import VecStep, VectorEnv
-from ..record.curve import EpisodeCurve, update_point
+from ..record.curve import EpisodeCurve, episode_columns, update_point
 from ..record.runlog import Trajectory
 from ..record.scene import episode_frame
 from ..record.schemas import (
@@ -182,16 +182,6 @@ class LiveView:
         eps = EpisodeBatch.concat([step_eps for _, _, step_eps in pending])
         ids = np.arange(pending[0][0], pending[0][0] + len(eps))  # all since the last sending
         ends = np.repeat([s for _, s, _ in pending], [len(e) for _, _, e in pending])
-        columns = {
-            "length": eps.length,
-            "return": eps.ret,
-            "captured": eps.captured,
-            "collision_terminated": eps.collision_terminated,
-            "truncated": eps.truncated,
-            "collisions": eps.collisions,
-            "wall_contacts": eps.wall_contacts,
-        }
-        if self._curve.learned:
-            columns["evader_return"] = eps.evader_ret
+        columns = episode_columns(eps, self._curve.learned)
         for time_ns, data in self._curve.add(ids, ends * self._step_ns, **columns):
             self._points.log(data, log_time=time_ns)

@@ -1,5 +1,5 @@
-"""The trainer's episode log, one new part of the run's MCAP log per session, and its
-live view (``train --live``)."""
+"""The trainer's episode log, one new part of the run's MCAP log per session, its live
+view (``train --live``) and its other views (``train --logger``)."""
 
 from __future__ import annotations
 
@@ -67,3 +67,12 @@ def start_live(run: RunState, live: LiveView) -> None:
     starts: it then gets ``step(actions, step)`` after every vector step and
     ``update(update, metrics)`` after every update."""
     live.start(run.env, step=run.update * run.cfg.steps_per_env, episode=run.stats.episodes)
+
+
+def start_loggers(run: RunState) -> None:
+    """Start the run's loggers (:mod:`.loggers`) on this session's env and clocks, as the
+    recorder starts: they then get ``step(actions, step)`` after every vector step and
+    ``update(update, metrics)`` after every update."""
+    step = run.update * run.cfg.steps_per_env
+    for logger in run.loggers:
+        logger.start(run.env, step=step, episode=run.stats.episodes)

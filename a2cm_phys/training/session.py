@@ -9,9 +9,9 @@ disk is full, no checkpoint follows a log that could not be written.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
-from contextlib import AbstractContextManager, nullcontext
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager, nullcontext
+from typing import Any
 
 from threadpoolctl import threadpool_limits
 
@@ -20,15 +20,12 @@ from ..base.exitcodes import OUT_OF_SPACE
 from ..config import Scenario
 from . import checkpoint
 from .progress import ProgressBar
-from .recording import open_recorder, start_live
+from .recording import open_recorder, start_live, start_loggers
 from .rollout import StepHook
 from .run_state import capture, state_at_last_update
 from .signals import ShieldedLog, StopSignals, signals_deferred
 from .state import LEARN, RunState
 from .summary import run_summary, write_summary
-
-if TYPE_CHECKING:
-    from .live import LiveView
 
 
 def run_session(run: RunState, one_update: Callable[[StepHook | None], None]) -> str:
@@ -101,10 +98,10 @@ def _train(
     run: RunState, signals: StopSignals, one_update: Callable[[StepHook | None], None]
 ) -> str:
     """The updates of a session with its log open, then its last checkpoint; the status it
-    stopped with."""
+    stopped with. The loggers are closed last, however the session ends."""
     dead_worker = _worker_error(run.scenario)
     status, save = "done", None
-    with _recorder(run) as recorder, _bar(run) as bar:
+    with _loggers(run), _recorder(run) as recorder, _bar(run) as bar:
         run.recorder = recorder
         if run.live is not None:
             start_live(run, run.live)
@@ -150,13 +147,22 @@ def _updates(
 ) -> None:
     """Update after update until the run is done or a stop is asked for (then a
     ``KeyboardInterrupt``), each logged, shown and checkpointed when one is due."""
-    on_step = _step_hook(log.record_step if log is not None else None, run.live)
+    on_step = _step_hook(
+        log.record_step if log is not None else None,
+        run.live.step if run.live is not None else None,
+        *(logger.step for logger in run.loggers),
+    )
     while run.update < run.cfg.updates:
         if signals.stop_requested:
             raise KeyboardInterrupt
         one_update(on_step)
         if log is not None:
             log.record_update(run.update, run.last_metrics)
+        if run.loggers:
+            signals.in_log = True  # a second Ctrl-C waits for whole rows
+            for logger in run.loggers:
+                logger.update(run.update, run.last_metrics)
+            signals.after_log()
         if run.live is not None:
             run.live.update(run.update, run.last_metrics)
         bar.tick()
@@ -164,18 +170,32 @@ def _updates(
             save_checkpoint(run)
 
 
-def _step_hook(record: StepHook | None, live: LiveView | None) -> StepHook | None:
-    """What sees every vector step: the log's recorder, the live view, both or neither."""
-    if live is None:
-        return record
-    if record is None:
-        return live.step
+def _step_hook(*hooks: StepHook | None) -> StepHook | None:
+    """What sees every vector step: those of the log's recorder, the live view and the
+    loggers there are (``None`` for one that is not), in that order; ``None`` if none."""
+    there = [hook for hook in hooks if hook is not None]
+    if len(there) <= 1:
+        return there[0] if there else None
 
-    def both(actions: Any, step: Any) -> None:
-        record(actions, step)
-        live.step(actions, step)
+    def every(actions: Any, step: Any) -> None:
+        for hook in there:
+            hook(actions, step)
 
-    return both
+    return every
+
+
+@contextmanager
+def _loggers(run: RunState) -> Iterator[None]:
+    """The run's loggers for the block: started on this session's env and clocks (before
+    the log, whose first update's rate would count a W&B start; a finished run gets no new,
+    empty views), closed when it ends, however it ends (a logger never raises)."""
+    if not run.finished:
+        start_loggers(run)
+    try:
+        yield
+    finally:
+        for logger in run.loggers:
+            logger.close()
 
 
 def _checkpoint_due(run: RunState) -> bool:

@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     from .descent import ExploitabilityDescent
     from .episode_stats import EpisodeStats
     from .live import LiveView
+    from .loggers import MetricsLogger
     from .opponents import OpponentPool, Pairing
     from .signals import StopSignals
     from .teams import Team
@@ -120,6 +121,9 @@ class RunState:
     """Why a resume fell back to the previous checkpoint, if it did."""
     live: LiveView | None
     """The live view the run streams to (``train --live``), or ``None``."""
+    loggers: list[MetricsLogger]
+    """The other views of its numbers (``train --logger``): each session starts them and
+    closes them at its end."""
 
     @property
     def model(self) -> ActorCritic:

@@ -22,6 +22,7 @@ can save its state (see :meth:`a2cm_phys.envs.vector.VectorEnv.state`).
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -30,6 +31,7 @@ import torch
 from ..config import Scenario, Train
 from ..envs.vector import VectorEnv
 from .episode_stats import EpisodeStats
+from .loggers import MetricsLogger, make_loggers
 from .opponents import LATEST, Pairing
 from .resume import resume_point
 from .rollout import StepHook, collect
@@ -64,6 +66,11 @@ class Trainer(RunState):
             plain line every 30 s elsewhere).
         checkpoint_seconds: save a checkpoint at least this often (wall time).
         checkpoint_every: also save every this many updates (0: time-based only).
+        live: the live view to stream to (``train --live``).
+        loggers: the other views of the run's numbers, which each session starts and
+            closes: ``train --logger`` names (``tensorboard``, ``wandb``, ``csv``; a
+            library not installed is a ``UserError``) or loggers. They change nothing of
+            the run.
     """
 
     def __init__(
@@ -79,10 +86,12 @@ class Trainer(RunState):
         checkpoint_seconds: float = 30.0,
         checkpoint_every: int = 0,
         live: LiveView | None = None,
+        loggers: Sequence[str | MetricsLogger] = (),
     ) -> None:
         torch.set_num_threads(cfg.threads)
         self.live = live
         self.scenario, self.cfg, self.run_dir = scenario, cfg, Path(run_dir)
+        self.loggers = make_loggers(loggers, self.run_dir, cfg)  # before the games start
         self.record, self.log_every, self.scene_every = record, log_every, scene_every
         self.progress = progress
         self.checkpoint_seconds, self.checkpoint_every = checkpoint_seconds, checkpoint_every
