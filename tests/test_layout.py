@@ -20,6 +20,7 @@ LAYERS = (
     ("deploy", ("deploy",)),
     ("config", ("config",)),
     ("envs", ("envs",)),
+    ("integrations", ("integrations",)),
     ("algos", ("algos",)),
     ("record", ("record",)),
     ("solve", ("solve",)),

@@ -127,6 +127,13 @@ class VectorEnv:
             self._start(np.arange(self.num_envs))
         return self.observe()
 
+    def restart(self, envs: np.ndarray) -> np.ndarray:
+        """Abandon the episodes running in games ``envs`` (no summary) and start new ones,
+        seeded from the same generator as every start; the observations of every game."""
+        self._check_open("restart")
+        self._start(np.asarray(envs, dtype=np.int64))
+        return self.observe()
+
     def episode_seeds(self) -> np.ndarray:
         """The episode seed of the episode running in each game."""
         return self.core.episode_seed.copy()
