@@ -3,11 +3,13 @@
     python benchmarks/bench_peers.py [--scenarios grid_collision,grid_random]
         [--algos a2cm,a2c,mappo,ippo] [--variants defaults,tuned] [--seeds 0-2]
         [--steps 640000] [--episodes 2000] [--jobs 2] [--out benchmarks/results/peers.jsonl]
+        [--figure benchmarks/results/peers.png]
 
 Each run trains on ``--steps`` environment steps (all games) and its team is then played
 greedily by our own evaluation (:func:`a2cm_phys.analysis.evaluation.play`, the same
 2,000 games for every learner: seed 1000 + seed) against the scenario's reference (the
-exact optimum on grids, over the start distribution with random starts). Ours train with
+exact optimum on grids, over the start distribution with random starts; in physics
+``pursuit`` played on 2,000 games). Ours train with
 the train command's defaults (``a2cm_phys.training.Trainer``); the peers are BenchMARL's
 own implementations on :class:`a2cm_phys.integrations.benchmarl.PursuitTask`, over our
 batched games:
@@ -36,12 +38,15 @@ import tempfile
 import time
 from pathlib import Path
 
+import matplotlib.pyplot as plt
+import numpy as np
 import torch
 from benchmarl.algorithms import IppoConfig, MappoConfig
 from benchmarl.experiment import Experiment, ExperimentConfig
 from benchmarl.models.mlp import MlpConfig
 
 from a2cm_phys.analysis.evaluation import optimum, play
+from a2cm_phys.analysis.policies import pursuer_policy
 from a2cm_phys.commands.sweep import parse_seeds
 from a2cm_phys.config import load_scenario, load_train, resolve_train
 from a2cm_phys.integrations.benchmarl import PursuitTask
@@ -100,10 +105,19 @@ def run_one(job: dict) -> dict:
     }
 
 
+def reference_steps(scenario: str, episodes: int) -> float:
+    """The reference's capture steps: the exact optimum on grids (over the start
+    distribution), else ``pursuit`` played on ``episodes`` games (seed 1000)."""
+    sc = load_scenario(scenario)
+    if sc.mode == "grid":
+        return float(optimum(sc)["capture_steps"])
+    return float(play(sc, pursuer_policy("pursuit", sc), episodes, 16, 1000).lengths.mean())
+
+
 def table(rows: list[dict]) -> str:
     """The medians over seeds, per scenario, learner and variant."""
     lines = [
-        "| scenario | learner | variant | steps | greedy ÷ optimum (seeds) | median | "
+        "| scenario | learner | variant | steps | greedy ÷ reference (seeds) | median | "
         "captured | collisions a game | train s |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
@@ -113,7 +127,7 @@ def table(rows: list[dict]) -> str:
         groups.setdefault((r["scenario"], r["algo"], r["variant"], r["steps"]), []).append(r)
     for (scenario, algo, variant, steps), rs in sorted(groups.items()):
         if scenario not in refs:
-            refs[scenario] = float(optimum(load_scenario(scenario))["capture_steps"])
+            refs[scenario] = reference_steps(scenario, rs[0]["episodes"])
         rs.sort(key=lambda r: r["seed"])
         ratios = [r["mean_steps"] / refs[scenario] for r in rs]
         cells = ", ".join(f"{x:.3f}" for x in ratios)
@@ -127,6 +141,33 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def figure(rows: list[dict], path: Path) -> None:
+    """Greedy steps ÷ the reference of every run (dots) and the median (bar), per
+    scenario and learner, with the median training time written under each bar."""
+    plt.switch_backend("Agg")
+    scenarios = sorted({(r["scenario"], r["steps"]) for r in rows})
+    fig, axes = plt.subplots(1, len(scenarios), figsize=(4.2 * len(scenarios), 3.6))
+    for ax, (scenario, steps) in zip(np.atleast_1d(axes), scenarios, strict=True):
+        ref = reference_steps(scenario, 2000)
+        mine = [r for r in rows if r["scenario"] == scenario and r["steps"] == steps]
+        labels = sorted(
+            {(r["algo"], r["variant"]) for r in mine}, key=lambda k: (k[0] not in OURS, k)
+        )
+        for x, (algo, variant) in enumerate(labels):
+            rs = [r for r in mine if (r["algo"], r["variant"]) == (algo, variant)]
+            ratios = [r["mean_steps"] / ref for r in rs]
+            ax.bar(x, statistics.median(ratios), color="C0" if algo in OURS else "C1", alpha=0.5)
+            ax.plot([x] * len(ratios), ratios, "k.", ms=4)
+            seconds = statistics.median(r["train_seconds"] for r in rs)
+            ax.annotate(f"{seconds:.0f} s", (x, 0.05), ha="center", fontsize=7)
+        ax.axhline(1.0, color="k", lw=0.8, ls="--")
+        ax.set_xticks(range(len(labels)), [f"{a}\n{v}" for a, v in labels], fontsize=7)
+        ax.set_title(f"{scenario}, {steps:,} steps", fontsize=9)
+        ax.set_ylabel("greedy steps ÷ reference")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
 def main() -> None:
     """Run the missing rows, then print the table."""
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -138,6 +179,7 @@ def main() -> None:
     p.add_argument("--episodes", type=int, default=2000)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--out", type=Path, default=Path("benchmarks/results/peers.jsonl"))
+    p.add_argument("--figure", type=Path, help="also draw the runs to this PNG")
     args = p.parse_args()
     rows = [json.loads(x) for x in args.out.read_text().splitlines()] if args.out.exists() else []
     done = {(r["scenario"], r["algo"], r["variant"], r["seed"], r["steps"]) for r in rows}
@@ -157,6 +199,8 @@ def main() -> None:
                 fh.write(json.dumps(row) + "\n")
             rows.append(row)
     print(table(rows))
+    if args.figure is not None:
+        figure(rows, args.figure)
 
 
 if __name__ == "__main__":
