@@ -16,10 +16,11 @@ import pytest
 from a2cm_phys.analysis.policies import OraclePolicy
 from a2cm_phys.commands.oracle import main
 from a2cm_phys.config import Scenario, load_scenario
-from a2cm_phys.envs.evaders.scripted import STAY, flee_actions
+from a2cm_phys.envs.evaders.scripted import STAY, blocked_grid, flee_actions
 from a2cm_phys.envs.grid import GridCore, GridRules
 from a2cm_phys.solve import GridModel, TooLargeError, solve_dp, state_visits
 from a2cm_phys.solve.cache import load_or_solve
+from a2cm_phys.solve.tables import flee_law
 
 
 def grid(**overrides) -> Scenario:
@@ -207,19 +208,31 @@ def test_optimum_beats_heuristics(overrides: dict) -> None:
 # --------------------------------------------------------------------------- playing it
 
 
-def test_flee_law_matches_the_evader() -> None:
-    """The solver's flee distribution is the law of ``flee_actions`` over episode seeds."""
-    sc = grid(size=4, pursuers=2, evader="flee")
+# cells (1, 1) and (2, 1) blocked: a wall beside which fleeing moves bump and stay put
+WALL = [{"x": 2.0, "y": 1.5, "width": 2.0, "height": 1.0}]
+
+
+@pytest.mark.parametrize("obstacles", [[], WALL], ids=["open", "wall"])
+def test_flee_law_matches_the_evader(obstacles: list) -> None:
+    """The solver's flee distribution is the law of ``flee_actions`` over episode seeds
+    (with obstacles, given the blocked cells as the grid core's evader reads them)."""
+    sc = grid(size=4, pursuers=2, evader="flee", obstacles=obstacles)
     model = GridModel(sc)
     xy = model.rules.cell_xy.astype(np.float64)
+    blocked = blocked_grid(sc)
+    assert (blocked is None) == (not obstacles)
     rng = np.random.default_rng(1)
     draws = 4000
-    for s in rng.choice(np.flatnonzero(model.valid()), 25, replace=False):
+    states = np.flatnonzero(model.valid())
+    if obstacles:  # the states where the wall changes the law: what is tested here
+        law_open = flee_law(grid(size=4, pursuers=2, evader="flee"))
+        states = states[np.any(law_open[states] != model.weights[states], axis=1)]
+    for s in rng.choice(states, 25, replace=False):
         cells = model.decode(np.array([s]))[:, 0]
         seeds = np.arange(draws, dtype=np.uint64) * np.uint64(7919) + np.uint64(s)
         got = flee_actions(
             seeds, np.zeros(draws, dtype=np.int64), np.repeat(xy[cells[-1]][None], draws, 0),
-            np.repeat(xy[cells[:-1]][None], draws, 0), sc.actions, 0, sc.size - 1,
+            np.repeat(xy[cells[:-1]][None], draws, 0), sc.actions, 0, sc.size - 1, blocked,
         )  # fmt: skip
         freq = np.bincount(got, minlength=sc.actions) / draws
         law = model.weights[s]

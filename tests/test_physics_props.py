@@ -24,8 +24,9 @@ from a2cm_phys.config import load_scenario, scenario_names
 from a2cm_phys.envs.physics import PhysicsCore
 
 UP, DOWN, LEFT, RIGHT, STAY = range(5)
-CONT = [name for name in scenario_names() if name.startswith("phys_cont")]
-PHYS = [name for name in scenario_names() if name.startswith("phys") and name not in CONT]
+PHYS_ALL = [name for name in scenario_names() if name.startswith("phys")]
+CONT = [name for name in PHYS_ALL if load_scenario(name).continuous]  # phys_diff* too
+PHYS = [name for name in PHYS_ALL if name not in CONT]
 ADVERSARIAL_GAMES, ADVERSARIAL_STEPS = 32, 1_100  # 4 batches: 140,800 steps
 
 

@@ -224,8 +224,11 @@ def stamp_ns(entity: Any) -> int:
     return entity.timestamp.seconds * 1_000_000_000 + entity.timestamp.nanos
 
 
-def check_messages(path: Path) -> dict[str, list[tuple[int, Any]]]:
-    """Validate every JSON message of a log against its stored schema (the package's own),
+def check_messages(
+    path: Path, expected: dict[str, Any] | None = None
+) -> dict[str, list[tuple[int, Any]]]:
+    """Validate every JSON message of a log against its stored schema (the package's own:
+    ``expected``, by default the fixed topics' :data:`SCHEMAS`),
     decode every scene through ``mcap`` and ``mcap-protobuf-support`` with the schema it was
     stored with, check each channel's times never go back; return each topic's
     ``(log_time, message)`` list (a dict, or a decoded ``foxglove.SceneUpdate``)."""
@@ -244,7 +247,7 @@ def check_messages(path: Path) -> dict[str, list[tuple[int, Any]]]:
             assert channel.message_encoding == "json" and schema.encoding == "jsonschema"
             if schema.id not in stored:
                 stored[schema.id] = validator(json.loads(schema.data))
-                assert json.loads(schema.data) == SCHEMAS[channel.topic]
+                assert json.loads(schema.data) == (expected or SCHEMAS)[channel.topic]
             stored[schema.id].validate(doc)
             seen.setdefault(channel.topic, []).append((message.log_time, doc))
     for topic, messages in seen.items():  # each channel's log times never go back

@@ -1,35 +1,131 @@
 """Scripted pursuer policies to measure learned ones against (``evaluate --policy``).
 
 ``pursuit``: every pursuer heads straight for the evader at full speed, each on its own,
-with no thought for the others: the baseline that cooperation must beat.
+with no thought for the others: the baseline that cooperation must beat. A
+differential-drive pursuer (continuous control) turns towards the evader and drives once
+facing it (:func:`steer`); with discrete moves the move primitives turn it themselves.
+
+:func:`detour_actions` is ``pursuit`` around obstacles: each pursuer heads for the next cell
+on a shortest path over the free cells to the evader's cell (breadth-first over the grid
+of cells, 4-connected), and straight for the evader once in its cell or next to it.
 """
 
 from __future__ import annotations
+
+from functools import lru_cache
 
 import numpy as np
 
 from ..config import Scenario
 
 UP, DOWN, LEFT, RIGHT, STAY = range(5)
+_STEPS = ((0, 1), (0, -1), (-1, 0), (1, 0))  # up, down, left, right, in cells
 
 
-def pursuit_actions(scenario: Scenario, positions: np.ndarray) -> np.ndarray:
+def pursuit_actions(
+    scenario: Scenario, positions: np.ndarray, headings: np.ndarray | None = None
+) -> np.ndarray:
     """Every pursuer's action towards the evader, from positions ``(..., N + 1, 2)``
-    (pursuers, then the evader; cells or metres, as ``Core.positions`` gives them).
+    (pursuers, then the evader; cells or metres, as ``Core.positions`` gives them), and
+    with differential drive the pursuers' ``headings`` ``(..., N, 2)`` (``(cos θ, sin θ)``,
+    as ``Core.headings`` gives them; needed with continuous control).
 
     With continuous control: the unit command ``(..., N, 2)`` float32 pointing at the
-    evader (zero on top of it). With discrete moves ``(..., N)`` int64: the axis move that
-    most reduces the distance, i.e. along the axis of the larger gap (x on a tie), or
-    ``stay`` when on the evader's position if the scenario has it (else ``up``).
+    evader (zero on top of it), or with differential drive the ``(forward, turn)`` command
+    that steers towards it (:func:`steer`). With discrete moves ``(..., N)`` int64: the
+    axis move that most reduces the distance, i.e. along the axis of the larger gap (x on
+    a tie), or ``stay`` when on the evader's position if the scenario has it (else ``up``).
     """
     positions = np.asarray(positions, dtype=np.float64)
-    gap = positions[..., -1:, :] - positions[..., :-1, :]  # (..., N, 2) to the evader
+    return _towards(scenario, positions[..., -1:, :] - positions[..., :-1, :], headings)
+
+
+def _towards(scenario: Scenario, gap: np.ndarray, headings: np.ndarray | None) -> np.ndarray:
+    """The actions of :func:`pursuit_actions` for the gaps ``(..., N, 2)`` from each
+    pursuer to where it heads."""
     if scenario.continuous:
         norm = np.sqrt((gap * gap).sum(-1, keepdims=True))
         unit = np.divide(gap, norm, out=np.zeros_like(gap), where=norm > 0)
+        if scenario.differential:
+            if headings is None:
+                raise ValueError("pursuit with differential drive needs the pursuers' headings")
+            return steer(scenario, unit, headings)
         return unit.astype(np.float32)
     dx, dy = gap[..., 0], gap[..., 1]
     horizontal = np.abs(dx) >= np.abs(dy)
     moves = np.where(horizontal, np.where(dx > 0, RIGHT, LEFT), np.where(dy > 0, UP, DOWN))
     there = (dx == 0) & (dy == 0)
     return np.where(there, STAY if scenario.actions == 5 else UP, moves).astype(np.int64)
+
+
+def steer(scenario: Scenario, direction: np.ndarray, headings: np.ndarray) -> np.ndarray:
+    """The differential-drive commands ``(..., N, 2)`` float32 ``(forward, turn)`` that take
+    pursuers at ``headings`` ``(..., N, 2)`` (``(cos θ, sin θ)``) along ``direction``
+    ``(..., N, 2)`` (unit vectors, or zero: stop): the turn closes the angle error ``e``
+    within one control period where the turn rate allows (``e / (max_turn_rate · dt)``,
+    clipped to ``[-1, 1]``), and the forward command is ``max(cos e, 0)``, full speed when
+    facing the way, none while facing more than 90° off it."""
+    direction = np.asarray(direction, dtype=np.float64)
+    headings = np.asarray(headings, dtype=np.float64)
+    cos = (headings * direction).sum(-1)
+    sin = headings[..., 0] * direction[..., 1] - headings[..., 1] * direction[..., 0]
+    error = np.arctan2(sin, cos)  # 0 where direction is zero
+    ph = scenario.physics
+    turn = np.clip(error / (ph.max_turn_rate * ph.dt), -1.0, 1.0)
+    forward = np.maximum(cos, 0.0)  # |direction| scales it: zero stops
+    return np.stack((forward, turn), axis=-1).astype(np.float32)
+
+
+def detour_actions(
+    scenario: Scenario, positions: np.ndarray, headings: np.ndarray | None = None
+) -> np.ndarray:
+    """:func:`pursuit_actions` around the scenario's obstacles, from positions ``(B, N + 1,
+    2)`` (and headings, as there): each pursuer heads for :func:`detour_targets`."""
+    positions = np.asarray(positions, dtype=np.float64)
+    gap = detour_targets(scenario, positions) - positions[:, :-1]
+    return _towards(scenario, gap, headings)
+
+
+def detour_targets(scenario: Scenario, positions: np.ndarray) -> np.ndarray:
+    """Where each pursuer heads ``(B, N, 2)`` (cells or metres, as ``positions`` ``(B, N +
+    1, 2)``): the next cell (its centre, in physics) on a shortest path over the free cells
+    (:meth:`~a2cm_phys.config.Scenario.blocked_cells`) to the evader's cell, the first of
+    up, down, left, right on a tie; the evader itself once in its cell or next to it, or
+    where no path leads there."""
+    positions = np.asarray(positions, dtype=np.float64)
+    top = scenario.size - 1
+    cells = np.clip(np.floor(positions), 0, top).astype(np.int64)
+    centre = 0.0 if scenario.mode == "grid" else 0.5
+    targets = np.repeat(positions[:, -1:], scenario.pursuers, axis=1)
+    for g, game in enumerate(cells.tolist()):
+        far = _distances(scenario, *game[-1])
+        for i, (x, y) in enumerate(game[:-1]):
+            if far[y, x] <= 1:
+                continue  # by the evader, or cut off from it: straight at it
+            around = [(x + dx, y + dy) for dx, dy in _STEPS]
+            steps = [far[b, a] if 0 <= a <= top and 0 <= b <= top else -1 for a, b in around]
+            best = min((d, k) for k, d in enumerate(steps) if d >= 0)[1]
+            targets[g, i] = np.array(around[best]) + centre
+    return targets
+
+
+@lru_cache(maxsize=4096)
+def _distances(scenario: Scenario, x: int, y: int) -> np.ndarray:
+    """Steps ``(size, size)`` (``[y, x]``) from every free cell to cell ``(x, y)`` over the
+    free cells, 4-connected; -1 where blocked or unreachable (read only: it is cached)."""
+    n = scenario.size
+    blocked = scenario.blocked_cells().reshape(n, n)
+    far = np.full((n, n), -1, dtype=np.int64)
+    far[y, x] = 0
+    frontier = [(x, y)]
+    while frontier:
+        later = []
+        for cx, cy in frontier:
+            for dx, dy in _STEPS:
+                ax, ay = cx + dx, cy + dy
+                if 0 <= ax < n and 0 <= ay < n and far[ay, ax] < 0 and not blocked[ay, ax]:
+                    far[ay, ax] = far[cy, cx] + 1
+                    later.append((ax, ay))
+        frontier = later
+    far.flags.writeable = False
+    return far

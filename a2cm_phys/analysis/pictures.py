@@ -240,6 +240,7 @@ def episode_picture(
                 contacts=contacts,
                 caption=text,
                 caption_kind=kind,
+                headings=None if traj.headings is None else traj.headings[k],
             )
             if masks is not None:
                 frame = sensing_overlay(scenario, frame, traj.positions[k], masks[k])

@@ -42,6 +42,8 @@ class _Episode:
         self.positions = [core.positions()[0].copy()]
         velocities = core.velocities()
         self.velocities = None if velocities is None else [velocities[0].copy()]
+        turning = env.scenario.differential
+        self.headings = [core.headings()[0].copy()] if turning else None
         self.actions: list[np.ndarray] = []
         self.reward: list[float] = []
         self.captured: list[bool] = []
@@ -57,6 +59,8 @@ class _Episode:
         self.positions.append(step.positions[0].copy())
         if self.velocities is not None:
             self.velocities.append(step.velocities[0].copy())
+        if self.headings is not None:
+            self.headings.append(step.headings[0].copy())
         self.reward.append(float(out.reward[0]))
         self.captured.append(bool(out.captured[0]))
         self.collisions.append(int(out.collisions[0]))
@@ -86,6 +90,7 @@ class _Episode:
             evader_reward=None
             if self.evader_reward is None
             else np.array(self.evader_reward, dtype=np.float64),
+            headings=None if self.headings is None else np.array(self.headings),
         )
 
 

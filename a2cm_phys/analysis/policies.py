@@ -5,6 +5,8 @@
 - ``oracle``: the exact optimum of the grid game (:mod:`a2cm_phys.oracle`); in physics
   mode the grid oracle driven in the physics arena: each body's centre is mapped to the
   cell it lies in, and the oracle's move becomes the velocity command in that direction.
+  (With differential drive a move turns the pursuer first: the move's primitive with
+  discrete control, :func:`~.baselines.steer` along it with continuous control.)
   It is the optimum against the scenario's own evader (the random one where that is
   learned), one team whatever evader :func:`matchup` sets against it: against another
   evader it is that team, not the other evader's best response (which is the oracle of
@@ -53,7 +55,7 @@ from ..envs.core import ACTION_DELTAS
 from ..solve.cache import OracleSolution, load_or_solve_optimum
 from ..solve.symmetric import SymmetricResult
 from ..training.rollout import Policy
-from .baselines import pursuit_actions
+from .baselines import pursuit_actions, steer
 from .names import (
     BEST_RESPONSE,
     EQUILIBRIUM,
@@ -77,6 +79,17 @@ def positions_from_obs(scenario: Scenario, obs: np.ndarray) -> np.ndarray:
     return xy * scenario.size
 
 
+def headings_from_obs(scenario: Scenario, obs: np.ndarray) -> np.ndarray | None:
+    """The pursuers' headings ``(B, N, 2)`` ``(cos θ, sin θ)`` from observations (the
+    state's last ``2 N`` numbers with differential drive), else ``None``."""
+    if not scenario.differential:
+        return None
+    obs = np.asarray(obs, dtype=np.float64)
+    n = scenario.pursuers
+    at = 4 * (n + 1)
+    return obs[:, at : at + 2 * n].reshape(len(obs), n, 2)
+
+
 def random_policy(scenario: Scenario) -> Policy:
     """Uniformly random actions for every pursuer."""
     shape = (scenario.pursuers,)
@@ -88,8 +101,10 @@ def random_policy(scenario: Scenario) -> Policy:
 
 
 def pursuit_policy(scenario: Scenario) -> Policy:
-    """Every pursuer straight at the evader, on its own (both control types)."""
-    return lambda obs, rng: pursuit_actions(scenario, positions_from_obs(scenario, obs))
+    """Every pursuer straight at the evader, on its own (both control types, either drive)."""
+    return lambda obs, rng: pursuit_actions(
+        scenario, positions_from_obs(scenario, obs), headings_from_obs(scenario, obs)
+    )
 
 
 def grid_twin(scenario: Scenario) -> Scenario:
@@ -160,7 +175,11 @@ def oracle_policy(scenario: Scenario, progress: bool = False) -> Policy:
     def act(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         cells = np.clip(np.floor(positions_from_obs(scenario, obs)), 0, top).astype(np.int64)
         moves = oracle.solution.actions(cells)
-        return directions[moves] if scenario.continuous else moves
+        if not scenario.continuous:
+            return moves
+        if scenario.differential:
+            return steer(scenario, directions[moves], headings_from_obs(scenario, obs))
+        return directions[moves]
 
     return act
 

@@ -22,7 +22,9 @@ what the pursuers sense (their own slices of the team vector), never the global 
   waypoint it was heading for, in the same direction.
 
 Commands are unit vectors (the continuous ``pursuit`` baseline's convention: a fraction
-of ``max_speed``, length 1, zero on the target itself). The policy has memory per game
+of ``max_speed``, length 1, zero on the target itself); with differential drive, the
+``(forward, turn)`` commands that steer along them (:func:`~.baselines.steer`), from each
+pursuer's own heading in its slice. The policy has memory per game
 (sweep progress, strips, sighting), forgotten by :meth:`SearchPolicy.episodes_ended`.
 """
 
@@ -35,6 +37,7 @@ import numpy as np
 from ..config import ConfigError, Scenario
 from ..envs.sensing import agent_slice, features, team_dim
 from ..training.rollout import Policy
+from .baselines import steer
 
 __all__ = ["SearchPolicy", "search_policy", "strip_bounds", "sweep_waypoints"]
 
@@ -192,7 +195,12 @@ class SearchPolicy:
             self.target[:, None, :],
             self.waypoints[self.strip, self.index],
         )
-        return _towards(goal - own)
+        unit = _towards(goal - own)
+        if not self.scenario.differential:
+            return unit
+        k = self.scenario.body_features  # a pursuer's own heading: its slice's (cos θ, sin θ)
+        rows = [np.asarray(obs)[:, agent_slice(self.scenario, i)] for i in range(len(own[0]))]
+        return steer(self.scenario, unit, np.stack(rows, axis=1)[:, :, k - 2 : k])
 
 
 def search_policy(scenario: Scenario) -> Policy:

@@ -29,12 +29,17 @@ def optimum_report(sol: OracleSolution | SymmetricResult) -> str:
         f"  optimal expected return: {sol.optimal_return(start):.6f}",
         f"  expected steps to capture: {sol.expected_capture_steps(start):.6f}",
     ]
+    if sc.obstacles:
+        blocked = np.flatnonzero(sc.blocked_cells())
+        where = " ".join(f"({c % sc.size},{c // sc.size})" for c in blocked)
+        lines.insert(1, f"  obstacles: {len(blocked)} blocked cell(s) {where}")
     if sc.start.random:
         from ..envs.starts import count_grid_starts
 
+        free = ", none on a blocked cell" if sc.obstacles else ""
         lines[-3] = (
             f"  start: random, uniform over {count_grid_starts(sc):,} starts (every pursuer "
-            f"at Manhattan distance >= {sc.start.min_evader_distance:g} from the evader)"
+            f"at Manhattan distance >= {sc.start.min_evader_distance:g} from the evader{free})"
         )
         lines[-2] = f"  optimal expected return over the starts: {sol.start_value:.6f}"
         lines[-1] = f"  expected steps to capture over the starts: {sol.start_steps:.6f}"

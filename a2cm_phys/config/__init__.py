@@ -10,6 +10,7 @@ anything is built). This face names what the rest of the package uses.
 
 from __future__ import annotations
 
+from .arena import Obstacle, ObstacleShape, default_start
 from .load import (
     SCENARIO_DIR,
     STORED_BEFORE,
@@ -47,11 +48,13 @@ from .resolve import (
 )
 from .scenario import (
     DEFAULT_DT,
+    OMIT_DEFAULT,
     SCENARIO_LIMITS,
     SCRIPTED_EVADERS,
     CollisionMode,
     Collisions,
     Control,
+    Drive,
     EvaderPolicy,
     EvaderReward,
     Mode,
@@ -81,6 +84,7 @@ __all__ = [
     "FLEE_DEFAULTS",
     "GRID_DEFAULTS",
     "MAX_WEIGHTS",
+    "OMIT_DEFAULT",
     "PRESETS",
     "SCENARIO_DIR",
     "SCENARIO_LIMITS",
@@ -95,11 +99,14 @@ __all__ = [
     "ConfigError",
     "Control",
     "DescentTeams",
+    "Drive",
     "Encoding",
     "EvaderPolicy",
     "EvaderReward",
     "InvalidKey",
     "Mode",
+    "Obstacle",
+    "ObstacleShape",
     "Optimizer",
     "Physics",
     "Rewards",
@@ -112,6 +119,7 @@ __all__ = [
     "check_limits",
     "check_network_size",
     "check_train",
+    "default_start",
     "entropy_game",
     "load_scenario",
     "load_train",

@@ -6,6 +6,7 @@ apply everywhere."""
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import types
@@ -80,9 +81,49 @@ def _build(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
         key, hint = f"{prefix}{name}", hints[name]
         if dataclasses.is_dataclass(hint):
             kwargs[name] = _build(hint, value, f"{key}.")
+        elif _table_list(hint):
+            kwargs[name] = _build_list(typing.get_args(hint)[0], value, key)
         else:
             kwargs[name] = _coerce(value, hint, key)
-    return cls(**kwargs)
+    missing = [
+        f.name
+        for f in fields.values()
+        if f.name not in kwargs
+        and f.default is dataclasses.MISSING
+        and f.default_factory is dataclasses.MISSING
+    ]
+    if missing:
+        raise InvalidKey(f"{prefix}{missing[0]}", "missing (this key has no default)")
+    obj = cls(**kwargs)
+    if prefix and hasattr(obj, "validate") and _table_list_item(prefix):
+        try:  # an item of a list of tables checks itself; its errors name the item
+            obj.validate()
+        except InvalidKey as err:
+            raise InvalidKey(f"{prefix}{err.key}", str(err)) from None
+    return obj
+
+
+def _table_list(hint: Any) -> bool:
+    """Whether ``hint`` is ``tuple[SomeDataclass, ...]`` (a TOML array of tables)."""
+    args = typing.get_args(hint)
+    return (
+        typing.get_origin(hint) is tuple
+        and len(args) == 2
+        and args[1] is Ellipsis
+        and dataclasses.is_dataclass(args[0])
+    )
+
+
+def _table_list_item(prefix: str) -> bool:
+    return prefix.endswith("].")
+
+
+def _build_list(cls: type, value: Any, key: str) -> tuple[Any, ...]:
+    """A tuple of ``cls`` from a list of tables (``[[key]]`` in TOML), each item's errors
+    naming ``key[i].field``."""
+    if not isinstance(value, (list, tuple)):
+        raise InvalidKey(key, f"expected a list of tables ([[{key}]]), got {value!r}")
+    return tuple(_build(cls, item, f"{key}[{i}].") for i, item in enumerate(value))
 
 
 def expand_shorthands(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
@@ -136,8 +177,23 @@ def _coerce(value: Any, hint: Any, key: str) -> Any:
 
 
 def to_dict(obj: Any) -> dict[str, Any]:
-    """A plain nested dict of a config dataclass (for JSON, MCAP metadata, TOML)."""
-    return dataclasses.asdict(obj)
+    """A plain nested dict of a config dataclass (for JSON, MCAP metadata, TOML). A field
+    whose metadata has ``omit_default`` is left out while it holds its default, so that
+    configs that do not use a key added later are written exactly as before it existed;
+    building from the dict restores the default."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if f.metadata.get("omit_default") and value == f.default:
+            continue
+        if dataclasses.is_dataclass(value):
+            value = to_dict(value)
+        elif isinstance(value, tuple) and value and dataclasses.is_dataclass(value[0]):
+            value = [to_dict(item) for item in value]
+        else:
+            value = copy.deepcopy(value)
+        out[f.name] = value
+    return out
 
 
 # --------------------------------------------------------------------------- overrides

@@ -9,6 +9,9 @@ import typing
 from dataclasses import dataclass, field
 from typing import Literal
 
+import numpy as np
+
+from .arena import Obstacle, blocked_cells, check_obstacles
 from .parse import InvalidKey, check_limits
 
 Mode = Literal["grid", "physics"]
@@ -17,6 +20,12 @@ EvaderReward = Literal["zero_sum", "survival"]
 CollisionMode = Literal["off", "terminate", "penalize"]
 Control = Literal["discrete", "continuous"]
 StartKind = Literal["fixed", "random"]
+Drive = Literal["holonomic", "differential"]
+
+OMIT_DEFAULT = {"omit_default": True}
+"""Field metadata of keys added after logs were first written: :func:`~.parse.to_dict` leaves
+such a key out while it holds its default, so a scenario that does not use it is written
+(config, log metadata, cache keys) exactly as before the key existed."""
 
 SCRIPTED_EVADERS: tuple[str, ...] = tuple(
     e for e in typing.get_args(EvaderPolicy) if e != "learned"
@@ -31,6 +40,9 @@ DEFAULT_DT = {"discrete": 1.0, "continuous": 0.1}
 class Rewards:
     """Team reward terms (SPEC §4); the reward is logged raw, learners may scale it.
 
+    A contact with an obstacle is a wall contact (``wall``) that also costs ``obstacle``
+    (physics mode; on a grid a move into a blocked cell is a wall bump, priced by ``wall``).
+
     ``evader`` is a learned evader's reward (SPEC §1b): ``zero_sum``, minus the team reward,
     or ``survival``, +1 for every step that does not end in its capture (its return is the
     number of steps it survived). Scripted evaders have no reward.
@@ -41,6 +53,7 @@ class Rewards:
     capture: float = 0.0
     wall: float = 0.0
     evader: EvaderReward = "zero_sum"
+    obstacle: float = field(default=0.0, metadata=OMIT_DEFAULT)  # per contact with an obstacle
 
 
 @dataclass(frozen=True)
@@ -52,7 +65,11 @@ class Collisions:
 
 @dataclass(frozen=True)
 class Physics:
-    """Physical parameters of physics mode (SPEC §3); one grid cell is one metre."""
+    """Physical parameters of physics mode (SPEC §3); one grid cell is one metre.
+
+    ``drive = "differential"``: every pursuer is a body with a heading that moves only
+    along it, commanded by (forward speed, turn rate) as fractions of ``max_speed`` and
+    ``max_turn_rate`` (rad/s); the evader stays holonomic."""
 
     box_side: float = 0.6
     evader_radius: float = 0.3
@@ -62,6 +79,9 @@ class Physics:
     substeps: int = 10  # fixed solver steps per control period
     wall_thickness: float = 1.0
     max_force: float = 50.0
+    # how pursuers move: "holonomic" (any direction) or "differential" (turn, then drive)
+    drive: Drive = field(default="holonomic", metadata=OMIT_DEFAULT)
+    max_turn_rate: float = field(default=math.pi, metadata=OMIT_DEFAULT)  # rad/s
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of the first impossible value."""
@@ -72,6 +92,7 @@ class Physics:
             "max_speed",
             "wall_thickness",
             "max_force",
+            "max_turn_rate",
         ):
             if not getattr(self, key) > 0:
                 raise InvalidKey(f"physics.{key}", f"must be > 0, got {getattr(self, key)!r}")
@@ -108,15 +129,33 @@ class Sensing:
     3×3 block around it), in physics the distance in metres between centres, both inclusive.
     ``share``: the pursuers pool their sightings (one radio), so each knows every teammate's
     position and the evader whenever any of them senses it; ``false``: each knows only what
-    it senses itself. A learned evader senses the pursuers within the same radius, alone."""
+    it senses itself. A learned evader senses the pursuers within the same radius, alone.
+
+    Physics mode only: ``rays = R`` (0: none; needs ``radius``) gives every agent a range
+    sensor, the distances to the first shape along ``R`` evenly spaced rays from its
+    heading out to ``range`` metres, appended to its observation; ``occlusion = true`` lets
+    obstacles hide bodies from ``radius`` sensing."""
 
     radius: float | None = None
     share: bool = False
+    rays: int = field(default=0, metadata=OMIT_DEFAULT)  # range-sensor rays per agent
+    range: float = field(default=3.0, metadata=OMIT_DEFAULT)  # metres a ray reaches
+    occlusion: bool = field(default=False, metadata=OMIT_DEFAULT)  # obstacles hide bodies
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of an impossible value."""
         if self.radius is not None and not self.radius > 0:
             raise InvalidKey("sensing.radius", f"must be > 0 when given, got {self.radius!r}")
+        if self.rays < 0:
+            raise InvalidKey("sensing.rays", f"must be >= 0, got {self.rays!r}")
+        if not self.range > 0:
+            raise InvalidKey("sensing.range", f"must be > 0, got {self.range!r}")
+        if self.rays and self.radius is None:
+            raise InvalidKey(
+                "sensing.rays",
+                "needs sensing.radius (the readings join each agent's own observation; a "
+                "radius of the arena's diagonal senses every body)",
+            )
 
     @property
     def on(self) -> bool:
@@ -169,6 +208,7 @@ class Scenario:
     physics: Physics = field(default_factory=Physics)
     sensing: Sensing = field(default_factory=Sensing)
     start: Start = field(default_factory=Start)
+    obstacles: tuple[Obstacle, ...] = field(default=(), metadata=OMIT_DEFAULT)
 
     def __post_init__(self) -> None:
         if self.physics.dt is None:  # the control type decides the default period
@@ -195,19 +235,35 @@ class Scenario:
         self.physics.validate()
         self.sensing.validate()
         self.start.validate()
+        if self.obstacles:
+            ph = self.physics
+            reach = (ph.box_side / 2**0.5, ph.evader_radius) if self.mode == "physics" else None
+            check_obstacles(self.obstacles, self.size, self.pursuers, reach, self.start.random)
         if self.start.random:
             self._check_start_room()
         if self.mode == "physics":
             self.physics.check_substeps()
-        elif self.control != "discrete":
-            raise InvalidKey(
-                "control", f"{self.control!r} needs mode = 'physics' (grid moves are discrete)"
-            )
+        else:
+            for key, value, default in (
+                ("control", self.control, "discrete"),
+                ("rewards.obstacle", self.rewards.obstacle, 0.0),
+                ("physics.drive", self.physics.drive, "holonomic"),
+                ("sensing.rays", self.sensing.rays, 0),
+                ("sensing.range", self.sensing.range, 3.0),
+                ("sensing.occlusion", self.sensing.occlusion, False),
+            ):
+                if value != default:
+                    raise InvalidKey(key, f"{value!r} needs mode = 'physics'")
+
+    def blocked_cells(self) -> np.ndarray:
+        """Whether each cell ``x + size · y`` is blocked by an obstacle (its centre covered),
+        ``(size²,)`` bool; all ``False`` without obstacles."""
+        return blocked_cells(self.size, self.obstacles)
 
     def _check_start_room(self) -> None:
         """Refuse a ``start.min_evader_distance`` no start can keep: on a grid, exactly (no
-        evader cell with ``pursuers`` cells that far); in physics, beyond the farthest a
-        pursuer's centre can be from the evader's."""
+        free evader cell with ``pursuers`` free cells that far); in physics, beyond the
+        farthest a pursuer's centre can be from the evader's."""
         d, n = self.start.min_evader_distance, self.size
         if self.mode == "grid":
             # an evader in a corner has the most cells that far (along any row or column a
@@ -215,6 +271,21 @@ class Scenario:
             need = max(math.ceil(d), 1)
             room = sum(max(0, n - max(0, need - x)) for x in range(n))
             farthest = f"{self.pursuers} cells that far from any evader cell"
+            if self.obstacles and room >= self.pursuers:
+                # count the free cells that far from each free evader cell, those nearest a
+                # corner first (the likeliest to have room), until one has room
+                free = np.flatnonzero(~self.blocked_cells())
+                y, x = np.divmod(free, n)
+                corner = np.minimum(x, n - 1 - x) + np.minimum(y, n - 1 - y)
+                order = np.argsort(corner, kind="stable")
+                step, room = max(1, 2**22 // len(free)), 0
+                for lo in range(0, len(free), step):
+                    e = order[lo : lo + step]
+                    far = np.abs(x[e, None] - x) + np.abs(y[e, None] - y) >= need
+                    room = max(room, int(far.sum(axis=1).max()))
+                    if room >= self.pursuers:
+                        break
+                farthest = f"{self.pursuers} free cells that far from any free evader cell"
         else:
             span = n - self.physics.box_side / 2 - self.physics.evader_radius
             room = self.pursuers if d <= span * 2**0.5 else 0
@@ -237,21 +308,38 @@ class Scenario:
         return [f"pursuer_{i}" for i in range(self.pursuers)]
 
     @property
+    def differential(self) -> bool:
+        """Whether the pursuers have headings (physics mode, ``physics.drive =
+        "differential"``)."""
+        return self.mode == "physics" and self.physics.drive == "differential"
+
+    @property
     def state_dim(self) -> int:
-        """Length of the global observation (state) vector (SPEC §5)."""
+        """Length of the global observation (state) vector (SPEC §5): ``2 (N + 1)`` on grids,
+        ``4 (N + 1)`` in physics, plus ``2 N`` (each pursuer's ``cos θ, sin θ``) with
+        differential drive."""
         per_agent = 4 if self.mode == "physics" else 2
-        return per_agent * (self.pursuers + 1)
+        return per_agent * (self.pursuers + 1) + (2 * self.pursuers if self.differential else 0)
+
+    @property
+    def body_features(self) -> int:
+        """Features ``k`` of one body in a sensed observation: 2 on grids (x, y), 4 in
+        physics (x, y, vx, vy), 6 with differential drive (then cos θ, sin θ; the evader's
+        are 0)."""
+        if self.mode != "physics":
+            return 2
+        return 6 if self.differential else 4
 
     @property
     def obs_dim(self) -> int:
         """Length of one agent's observation: the global state's (:attr:`state_dim`) with
         sensing off; with sensing on (SPEC §6b) its own ``k`` features, then ``1 + k`` (mask
-        bit, features) for each of the ``N`` other bodies: ``k + N (1 + k)``, where ``k`` is
-        2 (grid: x, y) or 4 (physics: x, y, vx, vy)."""
+        bit, features) for each of the ``N`` other bodies, then ``sensing.rays`` range
+        readings: ``k + N (1 + k) + rays``, where ``k`` is :attr:`body_features`."""
         if not self.sensing.on:
             return self.state_dim
-        k = 4 if self.mode == "physics" else 2
-        return k + self.pursuers * (1 + k)
+        k = self.body_features
+        return k + self.pursuers * (1 + k) + self.sensing.rays
 
 
 SCENARIO_LIMITS: dict[str, tuple[int, str]] = {

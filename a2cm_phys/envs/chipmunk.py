@@ -45,17 +45,33 @@ def stepper(space: pymunk.Space) -> Callable[[float], None]:
     return space.step
 
 
+_ATTRIBUTES = {
+    "position": "Position",
+    "velocity": "Velocity",
+    "angle": "Angle",
+    "angular_velocity": "AngularVelocity",
+    "rotation_vector": "Rotation",
+    "torque": "Torque",
+}
+"""pymunk's :class:`~pymunk.Body` attributes that :func:`accessor` reaches, and the names of
+chipmunk's getters and setters of each (``cpBodyGet…``, ``cpBodySet…``)."""
+
+
 def accessor(body: pymunk.Body, attr: str, write: bool) -> Callable[..., Any]:
-    """A function reading (no argument) or writing (one) ``body.position`` or
-    ``body.velocity``: chipmunk's getter or setter called directly on the body's C handle,
-    or pymunk's property (see :data:`DIRECT_CALLS`). Read values have ``x`` and ``y``."""
-    name = f"cpBody{'Set' if write else 'Get'}{attr.capitalize()}"
+    """A function reading (no argument) or writing (one) ``body.<attr>``, one of
+    :data:`_ATTRIBUTES` (``rotation_vector``, ``(cos θ, sin θ)``, is read only): chipmunk's
+    getter or setter called directly on the body's C handle, or pymunk's property (see
+    :data:`DIRECT_CALLS`). Read vectors have ``x`` and ``y``."""
+    name = f"cpBody{'Set' if write else 'Get'}{_ATTRIBUTES[attr]}"
     c_function, cp_body = getattr(pymunk.cp, name, None), getattr(body, "_body", None)
     if DIRECT_CALLS and c_function is not None and cp_body is not None:
         return partial(c_function, cp_body)
     return partial(setattr if write else getattr, body, attr)
 
 
+_CENTRE_AT = 64
+"""Byte offset in chipmunk's ``cpBody`` of ``p`` (then its ``y``), its centre of gravity:
+what joints read as the body's position (``cpBodySetPosition`` sets it and the transform)."""
 _POSITION_AT = 168
 """Byte offset in chipmunk's ``cpBody`` of ``transform.tx`` (then ``ty``): the position
 ``cpBodyGetPosition`` returns (the transform's origin; every body here has its centre of
@@ -63,6 +79,17 @@ gravity at its centre and no rotation, so this is ``body->p`` too)."""
 _VELOCITY_AT = 80
 """Byte offset in chipmunk's ``cpBody`` of ``v`` (then its ``y``), the velocity that
 ``cpBodyGetVelocity`` returns and ``cpBodySetVelocity`` sets."""
+_ANGLE_AT = 112
+"""Byte offset in chipmunk's ``cpBody`` of ``a``, the angle (rad) ``cpBodyGetAngle`` returns,
+then of ``w``, the angular velocity ``cpBodyGetAngularVelocity`` returns and
+``cpBodySetAngularVelocity`` sets."""
+_TORQUE_AT = 128
+"""Byte offset in chipmunk's ``cpBody`` of ``t``, the torque ``cpBodySetTorque`` sets (the
+next step's velocity update applies it, then sets it back to 0)."""
+_ROTATION_AT = 136
+"""Byte offset in chipmunk's ``cpBody`` of its transform's ``a``, ``b``, ``c``, ``d``: ``(cos
+a, sin a, −sin a, cos a)``, ``(a, b)`` the rotation ``cpBodyGetRotation`` returns (then come
+``tx``, ``ty``: :data:`_POSITION_AT`)."""
 
 
 @cache
@@ -118,6 +145,92 @@ def _raw_addresses(bodies: Sequence[pymunk.Body], controls: Sequence[pymunk.Body
             at[n:, None] + _VELOCITY_AT + xy,
         )
     )
+
+
+DRIVE_COLUMNS = (
+    *("pursuer",) * 8,  # transform (a, b, c, d, tx, ty), angle, angular velocity
+    "torque",  # the pursuer's torque: what turns it
+    *("rail",) * 6,  # its rail's rotation (a, b, c, d) and centre p (x, y)
+)
+"""What the 15 addresses per pursuer of :func:`drive_addresses` hold: the pursuer body's
+transform ``(a, b, c, d, tx, ty) = (cos θ, sin θ, −sin θ, cos θ, x, y)``, its angle ``θ``,
+angular velocity and torque; its rail body's rotation and centre, all its pin joint reads
+of it (:mod:`.world`), in the order of the pursuer's first six."""
+
+
+@cache
+def rotation_layout() -> bool:
+    """Whether this chipmunk's ``cpBody`` keeps angles, angular velocities, torques,
+    transforms and centres at :data:`_ANGLE_AT`, :data:`_TORQUE_AT`, :data:`_ROTATION_AT`
+    and :data:`_CENTRE_AT` (with :func:`body_layout`'s positions and velocities), checked
+    once on a spinning probe body stepped in a space against chipmunk's getters and
+    setters: a torque written through memory must turn it as ``cpBodySetTorque`` turns
+    its twin, and a rail given the probe's rotation and centre through memory must hold
+    what ``cpBodySetAngle`` and ``cpBodySetPosition`` give another. Where it fails,
+    differential drive keeps the per-body calls."""
+    if not body_layout():
+        return False
+    try:
+        probes, spaces = [], []
+        for _ in range(2):
+            body = pymunk.Body(1.0, pymunk.moment_for_box(1.0, (0.5, 0.5)))
+            space = pymunk.Space()
+            space.add(body, pymunk.Poly.create_box(body, (0.5, 0.5)))
+            body.position, body.velocity = (1.25, -3.5), (0.375, 7.0)
+            body.angle, body.angular_velocity = 0.75, -1.5
+            probes.append(body)
+            spaces.append(space)
+        body, twin = probes
+        rail, other = (pymunk.Body(body_type=pymunk.Body.KINEMATIC) for _ in range(2))
+        at = _raw_drive_addresses([body], [rail])[0]
+        other_at = _raw_drive_addresses([twin], [other])[0]
+        memory = BodyMemory(np.concatenate((at, other_at)))
+        index, other_index = memory.index(at), memory.index(other_at)
+        view = memory.view
+        view[index[8]] = 2.5  # as the core turns a pursuer
+        twin.torque = 2.5
+        for space in spaces:
+            space.step(0.05)
+        view[index[9:]] = view[index[:6]]  # as the core places and turns a rail
+        other.angle, other.position = body.angle, body.position
+        (x, y), (cx, cy) = body.rotation_vector, body.position
+        got = view[index].tolist()
+        want = [x, y, -y, x, cx, cy, body.angle, body.angular_velocity, 0.0]
+        turned = body.angular_velocity == twin.angular_velocity != -1.5
+        return got[:9] == want and turned and view[other_index[9:]].tolist() == got[9:]
+    except Exception:
+        return False
+
+
+def drive_addresses(
+    bodies: Sequence[pymunk.Body], rails: Sequence[pymunk.Body]
+) -> np.ndarray | None:
+    """Byte addresses ``(N, 15)`` for differential drive (:class:`BodyMemory`), per
+    pursuer :data:`DRIVE_COLUMNS`, of the pursuers' ``bodies`` and their ``rails``;
+    ``None`` where they cannot be used (see :data:`DIRECT_CALLS`, :func:`rotation_layout`)."""
+    if not DIRECT_CALLS or not rotation_layout():
+        return None
+    return _raw_drive_addresses(bodies, rails)
+
+
+def _raw_drive_addresses(bodies: Sequence[pymunk.Body], rails: Sequence[pymunk.Body]) -> np.ndarray:
+    """:func:`drive_addresses`, unchecked."""
+
+    def at(group: Sequence[pymunk.Body]) -> np.ndarray:
+        return np.array([int(pymunk.ffi.cast("uintptr_t", b._body)) for b in group])[:, None]
+
+    words = 8 * np.arange(6, dtype=np.int64)
+    body, rail = at(bodies), at(rails)
+    return np.concatenate(
+        (
+            body + _ROTATION_AT + words,
+            body + _ANGLE_AT + words[:2],
+            body + _TORQUE_AT,
+            rail + _ROTATION_AT + words[:4],
+            rail + _CENTRE_AT + words[:2],
+        ),
+        axis=1,
+    ).astype(np.int64)
 
 
 class BodyMemory:

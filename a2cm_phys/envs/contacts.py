@@ -30,11 +30,15 @@ PURSUER_EVADER = "pursuer_evader"
 """A pursuer touches the evader: capture, the episode terminates."""
 AGENT_WALL = "agent_wall"
 """An agent (pursuer or evader) touches the arena wall: recorded; pursuers earn ``rewards.wall``."""
-KINDS = (PURSUER_PURSUER, PURSUER_EVADER, AGENT_WALL)
+AGENT_OBSTACLE = "agent_obstacle"
+"""An agent touches a static obstacle (``b`` is ``"obstacle"``, whichever obstacle it is): a
+wall contact that also earns ``rewards.obstacle``."""
+KINDS = (PURSUER_PURSUER, PURSUER_EVADER, AGENT_WALL, AGENT_OBSTACLE)
 """Every event kind, in the order events are listed within a step."""
 
 Event = tuple[str, str, str, int]
-"""``(kind, a, b, step)``: agent names ``a`` and ``b`` (``"wall"`` for the wall), step number."""
+"""``(kind, a, b, step)``: agent names ``a`` and ``b`` (``"wall"`` for the wall, ``"obstacle"``
+for any obstacle), step number."""
 Pair = tuple[str, str, str]
 """``(kind, a, b)``: a touching pair, the event without its step."""
 
@@ -48,6 +52,7 @@ class StepScore:
     captured: bool
     collisions: int
     wall_contacts: int
+    obstacle_contacts: int = 0
 
 
 def score_events(events: Iterable[Event], rewards: Rewards, mode: CollisionMode) -> StepScore:
@@ -58,7 +63,10 @@ def score_events(events: Iterable[Event], rewards: Rewards, mode: CollisionMode)
       ``rewards.collision`` in ``terminate`` and ``penalize`` mode (and terminating in
       ``terminate``); in ``off`` mode counted but neither penalised nor terminating;
     - ``agent_wall`` → one wall contact per distinct pursuer, rewarded by ``rewards.wall``
-      (the evader's wall contacts are recorded as events but cost the team nothing).
+      (the evader's wall contacts are recorded as events but cost the team nothing);
+    - ``agent_obstacle`` → a wall contact as ``agent_wall`` (a pursuer touching the wall and
+      an obstacle in one step is one wall contact), and one obstacle contact per distinct
+      pursuer, rewarded by ``rewards.obstacle`` on top.
 
     The events are the contacts that *began* in the step (see :class:`ContactTracker`), so a
     contact lasting many steps is scored once, at its begin. Raises ``ValueError`` on an
@@ -66,16 +74,21 @@ def score_events(events: Iterable[Event], rewards: Rewards, mode: CollisionMode)
     """
     if mode not in ("off", "terminate", "penalize"):
         raise ValueError(f"unknown collision mode {mode!r}")
+    events = list(events)
     captured, collisions, wall_contacts = count_events(events)
-    reward = team_reward(rewards, mode, captured, collisions, wall_contacts)
+    obstacles = count_obstacle_contacts(events)
+    reward = team_reward(rewards, mode, captured, collisions, wall_contacts, obstacles)
     terminated = ends_episode(mode, captured, collisions)
-    return StepScore(float(reward), bool(terminated), captured, collisions, wall_contacts)
+    return StepScore(
+        float(reward), bool(terminated), captured, collisions, wall_contacts, obstacles
+    )
 
 
 def count_events(events: Iterable[Event]) -> tuple[bool, int, int]:
     """``(captured, collisions, wall_contacts)`` of one game's step: a capture if any
     pursuer touched the evader, one collision per distinct pursuer pair, one wall contact
-    per distinct pursuer. Raises ``ValueError`` on an unknown kind."""
+    per distinct pursuer that touched the wall or an obstacle. Raises ``ValueError`` on an
+    unknown kind."""
     captured = False
     pairs: set[tuple[str, str]] = set()
     walls: set[str] = set()
@@ -84,12 +97,18 @@ def count_events(events: Iterable[Event]) -> tuple[bool, int, int]:
             captured = True
         elif kind == PURSUER_PURSUER:
             pairs.add((a, b) if a <= b else (b, a))
-        elif kind == AGENT_WALL:
+        elif kind in (AGENT_WALL, AGENT_OBSTACLE):
             if a != "evader":
                 walls.add(a)
         else:
             raise ValueError(f"unknown contact event kind {kind!r} (kinds: {', '.join(KINDS)})")
     return captured, len(pairs), len(walls)
+
+
+def count_obstacle_contacts(events: Iterable[Event]) -> int:
+    """The obstacle contacts of one game's step: one per distinct pursuer with an
+    ``agent_obstacle`` event (each is also one of :func:`count_events`' wall contacts)."""
+    return len({a for kind, a, _b, _step in events if kind == AGENT_OBSTACLE and a != "evader"})
 
 
 class ContactTracker:

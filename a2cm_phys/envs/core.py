@@ -27,7 +27,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..config import CollisionMode, Rewards, Scenario
+from ..config import CollisionMode, Rewards, Scenario, default_start
 
 ACTION_NAMES = ("up", "down", "left", "right", "stay")
 """Discrete actions (SPEC §1): 0 up (+y), 1 down (−y), 2 left (−x), 3 right (+x), 4 stay."""
@@ -53,20 +53,27 @@ class StepOutcome:
     evader_action: np.ndarray  # the evader's command, for logs and replays: int64 (B,)
     # moves, or with continuous control float64 (B, 2) velocities as fractions of max_speed
     events: list[list[tuple[str, str, str, int]]] | None = None
+    # int64: the wall contacts that were with an obstacle (physics; None without obstacles)
+    obstacle_contacts: np.ndarray | None = None
 
 
-def team_reward(rewards: Rewards, mode: CollisionMode, captured, collisions, wall_contacts):
+def team_reward(
+    rewards: Rewards, mode: CollisionMode, captured, collisions, wall_contacts, obstacles=0
+):
     """The team reward of a step (SPEC §4), for scalars or arrays alike.
 
-    ``step + collision × collisions + capture × captured + wall × wall_contacts``, where
-    collisions cost nothing in ``off`` mode. Zero-weight terms are skipped (a scalar may
-    come back when every weight but ``step`` is zero).
+    ``step + collision × collisions + capture × captured + wall × wall_contacts + obstacle
+    × obstacles``, where collisions cost nothing in ``off`` mode and ``obstacles`` counts
+    the wall contacts that were with an obstacle (so an obstacle costs ``wall + obstacle``).
+    Zero-weight terms are skipped (a scalar may come back when every weight but ``step``
+    is zero).
     """
     reward = rewards.step
     for weight, count in (
         (rewards.collision if mode != "off" else 0.0, collisions),
         (rewards.capture, captured),
         (rewards.wall, wall_contacts),
+        (rewards.obstacle, obstacles),
     ):
         if weight:
             reward = reward + weight * count
@@ -95,14 +102,17 @@ def settle(
     wall_contacts: np.ndarray,
     evader_action: np.ndarray,
     events: list[list[tuple[str, str, str, int]]] | None = None,
+    obstacle_contacts: np.ndarray | None = None,
 ) -> StepOutcome:
     """Team reward, termination and truncation from a step's counts (SPEC §4), both modes.
 
     ``t`` is the step counter after the step. In ``off`` mode collisions are counted but
     neither penalised nor terminal; in ``terminate`` mode any collision ends the episode.
+    ``obstacle_contacts`` are the wall contacts that were with an obstacle.
     """
     mode = scenario.collisions.mode
-    reward = team_reward(scenario.rewards, mode, captured, collisions, wall_contacts)
+    obstacles = 0 if obstacle_contacts is None else obstacle_contacts
+    reward = team_reward(scenario.rewards, mode, captured, collisions, wall_contacts, obstacles)
     terminated = ends_episode(mode, captured, collisions)
     truncated = np.greater(t >= scenario.max_steps, terminated)  # at the limit and not ended
     if not isinstance(reward, np.ndarray):  # only the step reward: one number for all games
@@ -117,6 +127,7 @@ def settle(
         wall_contacts=wall_contacts,
         evader_action=evader_action,
         events=events,
+        obstacle_contacts=obstacle_contacts,
     )
 
 
@@ -183,18 +194,6 @@ class Core(Protocol):
 def agent_names(scenario: Scenario) -> list[str]:
     """All agents of a game, pursuers first and the evader last."""
     return [*scenario.agents, "evader"]
-
-
-def default_start(size: int, pursuers: int) -> np.ndarray:
-    """Start cells ``(N + 1, 2)`` (SPEC §1): corners, then the border; evader in the centre."""
-    top = size - 1
-    corners = [(0, 0), (top, 0), (0, top), (top, top)]
-    border = [(x, 0) for x in range(size)] + [(top, y) for y in range(1, size)]
-    border += [(x, top) for x in range(top - 1, -1, -1)] + [(0, y) for y in range(top - 1, 0, -1)]
-    order = corners + [c for c in border if c not in corners]
-    centre = (size // 2, size // 2)
-    cells = [c for c in order if c != centre][:pursuers]
-    return np.array([*cells, centre], dtype=np.int64)
 
 
 def parse_positions(

@@ -150,7 +150,11 @@ class Game:
             return render_text(self.scenario, positions)
         if mode == "rgb_array":
             velocities = self.core.velocities()
+            headings = self.core.headings() if self.scenario.differential else None
             return render_rgb(
-                self.scenario, positions, None if velocities is None else velocities[0]
+                self.scenario,
+                positions,
+                None if velocities is None else velocities[0],
+                headings=None if headings is None else headings[0],
             )
         return None

@@ -1,8 +1,9 @@
 """The paper's grid game (SPEC §2), as a batched numpy core stepping ``B`` games at once.
 
 Positions are cell indices ``x + size · y``; a precomputed table gives the cell each action
-leads to (a move off the arena stays put), so one fancy-index moves every agent of every
-game. Captures and collisions are whole-array comparisons of the old and new cells.
+leads to (a move off the arena or into a cell an obstacle blocks stays put), so one
+fancy-index moves every agent of every game. Captures and collisions are whole-array
+comparisons of the old and new cells.
 """
 
 from __future__ import annotations
@@ -39,7 +40,11 @@ class GridRules:
     """Static tables of one arena and the move rule itself.
 
     A *move index* is ``cell * 5 + action`` (action 4 = stay). Tables indexed by it give the
-    next cell and whether the move bumps into the border; ``meets[i, j]`` tabulates
+    next cell and whether the move bumps into a wall: the border, or a cell the scenario's
+    obstacles block (``blocked_cell``, :meth:`~a2cm_phys.config.Scenario.blocked_cells`).
+    No agent ever stands on a blocked cell (starts avoid them, moves into them stay put);
+    the tables still give moves *from* one, as if the obstacles were not there, so that a
+    solver sweeping every joint state finds each of them a way out. ``meets[i, j]`` tabulates
     :func:`meet` for every pair of moves, so a step is a handful of lookups. Arrays are
     *agent-major*: ``cells`` is ``(N + 1, B)``, one contiguous row per agent (pursuers,
     then the evader).
@@ -53,11 +58,15 @@ class GridRules:
         self.size, self.pursuers = size, n
         xy = np.stack(np.meshgrid(np.arange(size), np.arange(size), indexing="xy"), -1)
         self.cell_xy = xy.reshape(-1, 2).astype(np.int64)  # cell -> (x, y)
+        self.blocked_cell = scenario.blocked_cells()  # (C,) bool
         target = self.cell_xy[:, None, :] + ACTION_DELTAS[None]  # (C, 5, 2)
-        inside = np.all((target >= 0) & (target < size), axis=-1)
-        target = np.where(inside[..., None], target, self.cell_xy[:, None, :])
+        goes = np.all((target >= 0) & (target < size), axis=-1)  # (C, 5): not a wall bump
+        if self.blocked_cell.any():  # from a free cell into a blocked one: a bump too
+            into = np.where(goes, target[..., 0] + size * target[..., 1], 0)
+            goes &= ~(self.blocked_cell[into] & ~self.blocked_cell[:, None])
+        target = np.where(goes[..., None], target, self.cell_xy[:, None, :])
         self.move = (target[..., 0] + size * target[..., 1]).astype(np.int32).ravel()
-        self.blocked = (~inside).astype(np.int32).ravel()
+        self.blocked = (~goes).astype(np.int32).ravel()
         self.cell_obs = (self.cell_xy / (size - 1)).astype(np.float32)
         # Rows of the move-index array compared in a step: pursuer pairs, then each
         # pursuer with the evader (row n).
@@ -85,7 +94,7 @@ class GridRules:
 
         ``cells`` is ``(N + 1, B)``, ``pursuer_actions`` ``(B, N)``, ``evader_action`` ``(B,)``.
         Capture: a pursuer meets the evader. Collision: each pursuer pair that meets counts
-        once. Walls: pursuer moves blocked by the border.
+        once. Walls: pursuer moves blocked by the border or an obstacle.
         """
         n = self.pursuers
         index = np.concatenate((pursuer_actions.T, evader_action[None])) + cells * 5
@@ -148,7 +157,12 @@ class GridCore:
             if np.array_equal(xy[a], xy[b]):
                 cell = tuple(int(v) for v in xy[a])
                 raise ValueError(f"positions: {names[a]} and {names[b]} overlap at {cell}")
-        return xy[:, 0] + self.scenario.size * xy[:, 1]
+        cells = xy[:, 0] + self.scenario.size * xy[:, 1]
+        on = np.flatnonzero(self.rules.blocked_cell[cells])
+        if len(on):
+            cell = tuple(int(v) for v in xy[on[0]])
+            raise ValueError(f"positions: {names[on[0]]} on {cell}, a cell an obstacle blocks")
+        return cells
 
     def step(self, actions: np.ndarray, evader_actions: np.ndarray | None = None) -> StepOutcome:
         """Advance every game one step; ``actions`` are the pursuers' ``(B, N)`` actions,

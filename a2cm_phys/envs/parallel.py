@@ -22,27 +22,30 @@ from .game import Game
 
 
 def state_space(scenario: Scenario) -> spaces.Box:
-    """The global state's space: positions in [0, 1], physics velocities unbounded."""
+    """The global state's space: positions in [0, 1], physics velocities unbounded, the
+    headings' ``cos θ, sin θ`` (differential drive) in [-1, 1]."""
     n = scenario.pursuers + 1
     low = np.zeros(scenario.state_dim, dtype=np.float32)
     high = np.ones(scenario.state_dim, dtype=np.float32)
     if scenario.mode == "physics":
-        low[2 * n :], high[2 * n :] = -np.inf, np.inf
+        low[2 * n : 4 * n], high[2 * n : 4 * n] = -np.inf, np.inf
+        low[4 * n :] = -1.0
     return spaces.Box(low, high, dtype=np.float32)
 
 
 def observation_space(scenario: Scenario) -> spaces.Box:
     """One agent's observation space: the global state's with sensing off; with sensing
-    (SPEC §6b) mask bits and positions in [0, 1], physics velocities unbounded."""
+    (SPEC §6b) mask bits and positions in [0, 1], physics velocities unbounded, headings'
+    ``cos θ, sin θ`` in [-1, 1]."""
     if not scenario.sensing.on:
         return state_space(scenario)
     low = np.zeros(scenario.obs_dim, dtype=np.float32)
     high = np.ones(scenario.obs_dim, dtype=np.float32)
-    if scenario.mode == "physics":  # own (x, y, vx, vy), then (mask, x, y, vx, vy) each
-        low[2:4], high[2:4] = -np.inf, np.inf
-        for j in range(scenario.pursuers):
-            at = 4 + 5 * j + 3
-            low[at : at + 2], high[at : at + 2] = -np.inf, np.inf
+    if scenario.mode == "physics":  # own (x, y, vx, vy[, cos, sin]), then a mask bit and those
+        k = scenario.body_features
+        for at in (0, *(k + (1 + k) * j + 1 for j in range(scenario.pursuers))):
+            low[at + 2 : at + 4], high[at + 2 : at + 4] = -np.inf, np.inf
+            low[at + 4 : at + k] = -1.0
     return spaces.Box(low, high, dtype=np.float32)
 
 

@@ -16,6 +16,11 @@ Contact callbacks run only when shapes begin or stop touching and feed a
 evader's commands are applied at the start of a step; since pymunk moves bodies before it
 solves velocities, an agent starting from rest covers ``max_speed · dt · (1 − 1/substeps)``
 in its first step and exactly ``max_speed · dt`` per step once at speed.
+
+With ``physics.drive = "differential"`` the pursuers have headings (``(B, N, 2)`` ``(cos θ,
+sin θ)``, appended to the observation) and are steered substep by substep (:mod:`.drive`,
+:meth:`~.worlds.Worlds.drive`); every reset starts them at heading 0 (+x). With obstacles
+(:mod:`.obstacles`), a step's outcome also counts the wall contacts that were with one.
 """
 
 from __future__ import annotations
@@ -26,7 +31,7 @@ from itertools import combinations
 import numpy as np
 
 from ..config import Scenario
-from .contacts import count_events
+from .contacts import count_events, count_obstacle_contacts
 from .core import (
     ACTION_DELTAS,
     EvaderPolicy,
@@ -37,10 +42,12 @@ from .core import (
     parse_positions,
     settle,
 )
+from .drive import DrivePlan
 from .evaders import make_evader
 from .evaders.learned import refuse_evader_actions
+from .obstacles import check_thickness, obstacle_overlaps
 from .starts import random_starts
-from .world import Worlds
+from .worlds import Worlds
 
 
 def start_positions(scenario: Scenario) -> np.ndarray:
@@ -48,18 +55,35 @@ def start_positions(scenario: Scenario) -> np.ndarray:
     return default_start(scenario.size, scenario.pursuers).astype(np.float64) + 0.5
 
 
-def observation(scenario: Scenario, state: np.ndarray) -> np.ndarray:
-    """Observations ``(B, 4 (N + 1))`` float32 of a state ``(B, 2, N + 1, 2)`` (positions,
-    velocities): all positions / ``size``, then all velocities / ``max_speed`` (SPEC §5)."""
+def observation(
+    scenario: Scenario, state: np.ndarray, headings: np.ndarray | None = None
+) -> np.ndarray:
+    """Observations ``(B, state_dim)`` float32 of a state ``(B, 2, N + 1, 2)`` (positions,
+    velocities): all positions / ``size``, then all velocities / ``max_speed`` (SPEC §5),
+    then with differential drive the pursuers' ``headings`` ``(B, N, 2)`` ``(cos θ, sin θ)``."""
     scale = np.array([scenario.size, scenario.physics.max_speed], dtype=np.float64)
-    return (state / scale[:, None, None]).astype(np.float32).reshape(len(state), -1)
+    obs = (state / scale[:, None, None]).astype(np.float32).reshape(len(state), -1)
+    if headings is None:
+        return obs
+    return np.concatenate((obs, headings.astype(np.float32).reshape(len(state), -1)), axis=1)
+
+
+def rest_headings(scenario: Scenario, num_envs: int) -> np.ndarray | None:
+    """Every pursuer's heading at a reset, ``(B, N, 2)`` ``(cos θ, sin θ) = (1, 0)``, with
+    differential drive; ``None`` with holonomic pursuers (they have none)."""
+    if scenario.physics.drive != "differential":
+        return None
+    headings = np.zeros((num_envs, scenario.pursuers, 2))
+    headings[..., 0] = 1.0
+    return headings
 
 
 def placed_positions(scenario: Scenario, placed: Mapping[str, Sequence[float]]) -> np.ndarray:
     """Validate ``reset(options={"positions": placed})`` for physics mode: ``(N + 1, 2)`` metres.
 
-    Agents not named keep their default start. Every body must lie inside the arena and
-    no two may overlap (touching is fine); a ``ValueError`` names the agent(s) at fault.
+    Agents not named keep their default start. Every body must lie inside the arena, no
+    two may overlap and none may overlap an obstacle (touching is fine; pursuers as
+    unrotated boxes); a ``ValueError`` names the agent(s) at fault.
     """
     ph, size, n = scenario.physics, scenario.size, scenario.pursuers
     names = agent_names(scenario)
@@ -80,19 +104,34 @@ def placed_positions(scenario: Scenario, placed: Mapping[str, Sequence[float]]) 
                 f"positions: {names[i]} at {tuple(xy[i].tolist())} and "
                 f"{names[j]} at {tuple(xy[j].tolist())} overlap"
             )
+    blocked = obstacle_overlaps(scenario, xy)
+    if blocked.any():
+        i = int(np.argmax(blocked))
+        raise ValueError(
+            f"positions[{names[i]!r}] = {tuple(xy[i].tolist())} puts {names[i]} into an obstacle"
+        )
     return xy
 
 
 class StateViews:
     """The ``Core`` views of a physics state array ``_state`` of shape ``(B, 2, N + 1, 2)``
-    (positions, then velocities), shared by :class:`PhysicsCore` and the process core."""
+    (positions, then velocities) and, with differential drive, of the pursuers' headings
+    ``_headings`` ``(B, N, 2)`` (``None`` otherwise), shared by :class:`PhysicsCore` and the
+    process core."""
 
     scenario: Scenario
     _state: np.ndarray
+    _headings: np.ndarray | None
 
     def observe(self) -> np.ndarray:
-        """``(B, 4 (N + 1))`` float32: all positions / ``size``, then velocities / ``max_speed``."""
-        return observation(self.scenario, self._state)
+        """``(B, state_dim)`` float32: all positions / ``size``, then velocities /
+        ``max_speed``, then with differential drive the pursuers' ``(cos θ, sin θ)``."""
+        return observation(self.scenario, self._state, self._headings)
+
+    def headings(self) -> np.ndarray | None:
+        """The pursuers' headings ``(B, N, 2)`` as ``(cos θ, sin θ)`` with differential
+        drive, else ``None``."""
+        return None if self._headings is None else self._headings.copy()
 
     def positions(self) -> np.ndarray:
         """Agent centres ``(B, N + 1, 2)`` in metres: pursuers, then the evader."""
@@ -117,6 +156,7 @@ class PhysicsCore(StateViews):
             raise ValueError(f"PhysicsCore needs a physics scenario, got mode={scenario.mode!r}")
         ph, n = scenario.physics, scenario.pursuers
         ph.check_substeps()  # a ValueError naming physics.substeps
+        check_thickness(scenario)  # one naming the obstacle
         self.scenario = scenario
         self.num_envs = num_envs
         self.t = np.zeros(num_envs, dtype=np.int64)
@@ -130,6 +170,8 @@ class PhysicsCore(StateViews):
         self._worlds = Worlds(scenario, num_envs, self._start)
         self._state = np.zeros((num_envs, 2, n + 1, 2))  # [game, position|velocity, agent, xy]
         self._state[:, 0] = self._start
+        self._headings = rest_headings(scenario, num_envs)
+        self._obstacles = bool(scenario.obstacles)
 
     # ------------------------------------------------------------------ reset
 
@@ -154,6 +196,8 @@ class PhysicsCore(StateViews):
         self._worlds.restart(envs.tolist(), starts)
         for env, xy in zip(envs.tolist(), starts, strict=True):
             self._state[env, 0], self._state[env, 1] = self._start if xy is None else xy, 0.0
+        if self._headings is not None:
+            self._headings[envs] = (1.0, 0.0)
         self.t[envs] = 0
         self.episode_seed[envs] = seeds
         self._evader.restart(envs, self.episode_seed[envs])
@@ -176,8 +220,9 @@ class PhysicsCore(StateViews):
 
     def step(self, actions: np.ndarray, evader_actions: np.ndarray | None = None) -> StepOutcome:
         """Advance every game one control period with the pursuers' ``(B, N)`` actions, or
-        their ``(B, N, 2)`` velocity commands with continuous control; ``evader_actions``
-        (``(B,)`` or ``(B, 2)``) are a learned evader's, required then and refused otherwise."""
+        their ``(B, N, 2)`` velocity commands with continuous control (``(forward, turn)``
+        with differential drive); ``evader_actions`` (``(B,)`` or ``(B, 2)``) are a learned
+        evader's, required then and refused otherwise."""
         if self._give is not None:
             self._give(evader_actions)
         elif evader_actions is not None:
@@ -186,6 +231,15 @@ class PhysicsCore(StateViews):
         pos = self._state[:, 0]
         evader = self._evader.moves(self.episode_seed, self.t, pos[:, n], pos[:, :n])
         self.t += 1
+        if self._headings is not None:
+            if self._continuous:
+                evader_velocity = clip_to_disc(evader) * self.scenario.physics.max_speed
+            else:
+                evader_velocity = self._velocities[evader]
+            plan = DrivePlan(self.scenario, actions)
+            steps = self.t.tolist()
+            events = self._worlds.drive(plan, evader_velocity, steps, self._state, self._headings)
+            return self._score(events, evader)
         if self._continuous:
             commands = np.concatenate((actions, evader[:, None]), axis=1)
             velocities = clip_to_disc(commands) * self.scenario.physics.max_speed
@@ -199,10 +253,13 @@ class PhysicsCore(StateViews):
         captured = np.zeros(b, dtype=bool)
         collisions = np.zeros(b, dtype=np.int64)
         walls = np.zeros(b, dtype=np.int64)
+        obstacles = np.zeros(b, dtype=np.int64) if self._obstacles else None
         for g, game_events in enumerate(events):
             if game_events:  # most steps of most games have no new contact
                 captured[g], collisions[g], walls[g] = count_events(game_events)
-        return settle(self.scenario, self.t, captured, collisions, walls, evader, events)
+                if obstacles is not None:
+                    obstacles[g] = count_obstacle_contacts(game_events)
+        return settle(self.scenario, self.t, captured, collisions, walls, evader, events, obstacles)
 
     # ------------------------------------------------------------------ views
 

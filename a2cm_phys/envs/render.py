@@ -4,7 +4,10 @@ Both take one game's positions ``(N + 1, 2)`` (pursuers, then the evader): integ
 grid mode, metres in physics mode, where cell ``(x, y)`` spans ``[x, x + 1] × [y, y + 1]``.
 What touched in a step (:class:`Contacts`, from :func:`step_contacts`) is marked in both:
 in text by its own symbol (:data:`TEXT_LEGEND`), in a frame by a ring around a caught
-evader and a star where two pursuers collided, with a legend under the arena.
+evader and a star where two pursuers collided, with a legend under the arena. A frame
+draws the scenario's obstacles (physics: their shapes; grid: the cells they block) in the
+walls' colour, and differential-drive pursuers turned by their headings, a notch on their
+front edge.
 """
 
 from __future__ import annotations
@@ -20,6 +23,8 @@ from .grid import meet
 
 PURSUER_COLOURS = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b")
 EVADER_COLOUR = "#444444"
+WALL_COLOUR = "#555555"
+"""The arena's walls and its obstacles."""
 CAPTURE_COLOUR = "#f2b701"
 """The ring around a caught evader."""
 COLLISION_COLOUR = "#ffe600"
@@ -133,6 +138,8 @@ def legend_labels(scenario: Scenario, trail: bool = False) -> list[str]:
     """The entries of a frame's legend, in order (``trail``: paths are drawn)."""
     n = scenario.pursuers
     labels = [f"pursuers {', '.join(map(str, range(n)))}" if n > 1 else "pursuer 0", "evader"]
+    if scenario.obstacles:
+        labels.append("obstacle")
     if trail:
         labels.append("path so far")
     if scenario.mode == "physics":
@@ -150,6 +157,7 @@ def render_rgb(
     contacts: Contacts | None = None,
     caption: str = "",
     caption_kind: str = "other",
+    headings: np.ndarray | None = None,
 ) -> np.ndarray:
     """An RGB uint8 picture ``pixels`` wide (:data:`HEIGHT_RATIO` × as high): the arena with
     its grid lines and walls, pursuer squares (with velocity arrows in physics mode) and the evader
@@ -158,7 +166,9 @@ def render_rgb(
     ``trail``, earlier positions ``(T, N + 1, 2)`` (oldest first), draws each agent's path
     as a thin line in its colour (continuous control's paths). ``contacts`` are marked: a
     ring around a caught evader, a star between two pursuers that collided. On the grid,
-    agents in one cell are drawn smaller, side by side, so that none hides another."""
+    agents in one cell are drawn smaller, side by side, so that none hides another.
+    ``headings`` ``(N, 2)`` ``(cos θ, sin θ)`` (differential drive) turn the pursuers' squares
+    and notch their front edges; without them squares are drawn unturned."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -171,7 +181,7 @@ def render_rgb(
         path = np.concatenate((_centres(scenario, trail), _centres(scenario, positions)[None]))
         for xy, colour in zip(path.transpose(1, 0, 2), _colours(scenario), strict=True):
             ax.plot(xy[:, 0], xy[:, 1], color=colour, lw=1.4, alpha=0.6)
-    _draw_agents(ax, scenario, centres, scale, velocities)
+    _draw_agents(ax, scenario, centres, scale, velocities, headings)
     _draw_contacts(ax, scenario, centres, contacts or Contacts())
     if title:
         fig.text(0.5, 1 - 0.06 / height, title, ha="center", va="top", fontsize=10.5)
@@ -199,11 +209,32 @@ def _draw_arena(ax: Any, scenario: Scenario) -> None:
     ax.set_ylim(-wall, size + wall)
     ax.set_aspect("equal")
     ax.axis("off")
-    ax.add_patch(Rectangle((-wall, -wall), size + 2 * wall, size + 2 * wall, color="#555555"))
+    ax.add_patch(Rectangle((-wall, -wall), size + 2 * wall, size + 2 * wall, color=WALL_COLOUR))
     ax.add_patch(Rectangle((0, 0), size, size, color="white"))
     for k in range(1, size):
         ax.plot([k, k], [0, size], color="#dddddd", lw=0.8, zorder=1)  # under the agents
         ax.plot([0, size], [k, k], color="#dddddd", lw=0.8, zorder=1)
+    _draw_obstacles(ax, scenario)
+
+
+def _draw_obstacles(ax: Any, scenario: Scenario) -> None:
+    """Physics: each obstacle's shape; grid: the cells the obstacles block (what the game
+    plays), over the cells' lines and under the agents."""
+    from matplotlib.patches import Circle, Rectangle
+
+    if scenario.mode == "grid":
+        blocked = np.flatnonzero(scenario.blocked_cells())
+        for y, x in zip(*np.divmod(blocked, scenario.size), strict=True):
+            ax.add_patch(Rectangle((x, y), 1.0, 1.0, color=WALL_COLOUR, zorder=2))
+        return
+    for obstacle in scenario.obstacles:
+        if obstacle.shape == "circle":
+            ax.add_patch(Circle((obstacle.x, obstacle.y), obstacle.radius, color=WALL_COLOUR,
+                                zorder=2))  # fmt: skip
+        else:
+            hx, hy = obstacle.half_extents
+            corner = (obstacle.x - hx, obstacle.y - hy)
+            ax.add_patch(Rectangle(corner, 2 * hx, 2 * hy, color=WALL_COLOUR, zorder=2))
 
 
 def _drawn_centres(scenario: Scenario, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -231,6 +262,7 @@ def _draw_agents(
     centres: np.ndarray,
     scale: np.ndarray,
     velocities: np.ndarray | None,
+    headings: np.ndarray | None = None,
 ) -> None:
     from matplotlib import patheffects
     from matplotlib.patches import Circle, Rectangle
@@ -240,7 +272,18 @@ def _draw_agents(
     for i, (x, y) in enumerate(centres[:-1]):
         side = phys.box_side * scale[i]
         colour = PURSUER_COLOURS[i % len(PURSUER_COLOURS)]
-        ax.add_patch(Rectangle((x - side / 2, y - side / 2), side, side, color=colour, zorder=3))
+        corner = (x - side / 2, y - side / 2)
+        if headings is None:
+            ax.add_patch(Rectangle(corner, side, side, color=colour, zorder=3))
+        else:
+            cos, sin = (float(v) for v in headings[i])
+            degrees = float(np.degrees(np.arctan2(sin, cos)))
+            ax.add_patch(Rectangle(corner, side, side, angle=degrees, rotation_point="center",
+                                   color=colour, zorder=3))  # fmt: skip
+            front = np.array([x, y]) + side / 2 * np.array([cos, sin])
+            across = side / 4 * np.array([-sin, cos])
+            notch = np.stack([front - across, front + across])
+            ax.plot(notch[:, 0], notch[:, 1], color="black", lw=3, zorder=4)
         ax.text(x, y, str(i), ha="center", va="center", color="white", zorder=7,
                 fontsize=13 * scale[i], weight="bold", path_effects=outline)  # fmt: skip
     ex, ey = centres[-1]
@@ -276,6 +319,8 @@ def _draw_legend(fig: Any, scenario: Scenario, trail: bool) -> None:
         pursuers,
         Line2D([], [], marker="o", ls="none", ms=9, color=EVADER_COLOUR),
     ]
+    if scenario.obstacles:
+        handles.append(Line2D([], [], marker="s", ls="none", ms=9, color=WALL_COLOUR))
     if trail:
         handles.append(Line2D([], [], color=PURSUER_COLOURS[0], lw=1.4, alpha=0.6))
     if scenario.mode == "physics":

@@ -4,10 +4,14 @@ With ``sensing.radius`` set, every agent (the ``N`` pursuers, then the evader) g
 observation of its own, built from the global state vector (SPEC §5) and the positions:
 
 - its own ``k`` features: ``x, y`` (grid: cell / ``(size − 1)``), or in physics
-  ``x, y, vx, vy`` (metres / ``size``, then m/s / ``max_speed``), scaled as in the state;
+  ``x, y, vx, vy`` (metres / ``size``, then m/s / ``max_speed``), scaled as in the state,
+  and with differential drive ``cos θ, sin θ`` (a pursuer's heading; the evader's are 0);
 - then, for each other body in a fixed order (a pursuer: the other pursuers in index order,
   then the evader; the evader: the pursuers in index order), a mask bit (1.0 when sensed)
-  and that body's ``k`` features, all ``+0.0`` when not sensed (never the true value).
+  and that body's ``k`` features, all ``+0.0`` when not sensed (never the true value);
+- then, with ``sensing.rays = R`` (physics), its range sensor: ``R`` distances to the first
+  shape along evenly spaced rays from its heading, as fractions of ``sensing.range``
+  (:mod:`.rays`).
 
 ``Scenario.obs_dim = k + N (1 + k)``. A body is sensed when its distance is at most the
 radius (grid: Chebyshev in cells; physics: metres between centres). With ``share`` the
@@ -24,11 +28,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import Scenario
+from .rays import cast_rays, visible
 
 
 def features(scenario: Scenario) -> int:
-    """Features ``k`` of one body: 2 (x, y) on grids, 4 (x, y, vx, vy) in physics."""
-    return 4 if scenario.mode == "physics" else 2
+    """Features ``k`` of one body: 2 (x, y) on grids, 4 (x, y, vx, vy) in physics, 6 with
+    differential drive (:attr:`~a2cm_phys.config.Scenario.body_features`)."""
+    return scenario.body_features
 
 
 def team_dim(scenario: Scenario) -> int:
@@ -42,12 +48,15 @@ def team_dim(scenario: Scenario) -> int:
 def sensed(scenario: Scenario, positions: np.ndarray) -> np.ndarray:
     """Masks ``(B, N + 1, N + 1)`` bool: ``[b, i, j]`` whether agent ``i`` (pursuers, then the
     evader) knows body ``j`` in game ``b``, from positions ``(B, N + 1, 2)`` (cells or metres).
-    Every agent knows itself."""
+    Every agent knows itself. With ``sensing.occlusion`` a body behind an obstacle (the
+    segment between the centres crossing one) is not sensed."""
     xy = np.asarray(positions, dtype=np.float64)
     delta = np.abs(xy[:, :, None, :] - xy[:, None, :, :])
     grid = scenario.mode == "grid"
     dist = delta.max(-1) if grid else np.sqrt((delta * delta).sum(-1))  # Chebyshev, metres
     seen = dist <= float(scenario.sensing.radius)
+    if scenario.sensing.occlusion and scenario.obstacles:  # an obstacle in the way hides
+        seen &= visible(xy, scenario.obstacles)
     n = scenario.pursuers
     if scenario.sensing.share:
         team = seen[:, :n].any(1)  # (B, N + 1): anything any pursuer senses
@@ -62,8 +71,13 @@ def _bodies(scenario: Scenario, state: np.ndarray) -> np.ndarray:
     if scenario.mode == "grid":
         return state.reshape(len(state), count, 2)
     pos = state[:, : 2 * count].reshape(len(state), count, 2)
-    vel = state[:, 2 * count :].reshape(len(state), count, 2)
-    return np.concatenate([pos, vel], axis=-1)
+    vel = state[:, 2 * count : 4 * count].reshape(len(state), count, 2)
+    parts = [pos, vel]
+    if scenario.differential:  # the pursuers' headings, the evader's zeros
+        headings = np.zeros_like(pos)
+        headings[:, :-1] = state[:, 4 * count :].reshape(len(state), count - 1, 2)
+        parts.append(headings)
+    return np.concatenate(parts, axis=-1)
 
 
 def _others(count: int) -> np.ndarray:
@@ -81,7 +95,31 @@ def agent_observations(scenario: Scenario, state: np.ndarray, positions: np.ndar
     seen = body[:, others]  # (B, C, N, k)
     seen = np.where(mask[..., None], seen, np.float32(0.0))
     rows = np.concatenate([mask[..., None].astype(np.float32), seen], axis=-1)
-    return np.concatenate([body, rows.reshape(b, count, -1)], axis=-1)
+    parts = [body, rows.reshape(b, count, -1)]
+    if scenario.sensing.rays:
+        parts.append(range_readings(scenario, body, positions))
+    return np.concatenate(parts, axis=-1)
+
+
+def range_readings(scenario: Scenario, body: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """Every agent's range sensor (``sensing.rays``) as fractions of ``sensing.range``,
+    ``(B, N + 1, rays)`` float32, from the bodies' features ``(B, N + 1, k)`` (headings with
+    differential drive) and positions ``(B, N + 1, 2)`` metres (:func:`~.rays.cast_rays`)."""
+    ph, sensing, n = scenario.physics, scenario.sensing, scenario.pursuers
+    headings = None
+    if scenario.differential:
+        headings = np.arctan2(body[:, :n, 5].astype(np.float64), body[:, :n, 4])
+    reach = cast_rays(
+        positions,
+        headings,
+        sensing.rays,
+        sensing.range,
+        scenario.size,
+        ph.box_side,
+        ph.evader_radius,
+        scenario.obstacles,
+    )
+    return (reach / sensing.range).astype(np.float32)
 
 
 def team_observation(scenario: Scenario, state: np.ndarray, positions: np.ndarray) -> np.ndarray:

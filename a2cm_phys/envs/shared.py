@@ -16,7 +16,8 @@ from .physics import PhysicsCore
 
 OUTCOME_FIELDS = tuple(f.name for f in fields(StepOutcome) if f.name != "events")
 """The fields of :class:`~.core.StepOutcome` that travel through shared memory (all but
-the contact events)."""
+the contact events; ``obstacle_contacts`` only in a scenario with obstacles, see
+:attr:`SharedBatch.outcome_fields`)."""
 
 Placement = Mapping[str, Sequence[float]] | None
 """One game's explicit start positions for a reset (agent name to metres), or ``None``."""
@@ -27,8 +28,8 @@ class SharedBatch:
     share, in one block of shared memory. The parent writes the pursuers' actions (and a
     learned evader's, ``evader_actions``) and marks games to reset (``reset``, with their
     ``seed``); the workers clear those marks and write each field of the step outcome but
-    the events, and the state (positions, velocities). ``views(lo, hi)`` gives numpy views
-    of games ``lo:hi``."""
+    the events, and the state (positions, velocities, and with differential drive the
+    pursuers' ``headings``). ``views(lo, hi)`` gives numpy views of games ``lo:hi``."""
 
     def __init__(self, scenario: Scenario, num_envs: int, ctx: Any) -> None:
         n = scenario.pursuers
@@ -48,6 +49,13 @@ class SharedBatch:
             ("captured", np.dtype(np.bool_), ()),
             ("reset", np.dtype(np.bool_), ()),
         ]
+        if scenario.obstacles:
+            self.layout.append(("obstacle_contacts", np.dtype(np.int64), ()))
+        if scenario.differential:
+            self.layout.append(("headings", np.dtype(np.float64), (n, 2)))
+        names = {name for name, _, _ in self.layout}
+        self.outcome_fields = tuple(name for name in OUTCOME_FIELDS if name in names)
+        """The outcome's fields this batch carries (a missing one is ``None``)."""
         self.num_envs = num_envs
         size = sum(_bytes(dtype, num_envs, tail) for _, dtype, tail in self.layout)
         self.block = ctx.RawArray("b", size)
@@ -86,6 +94,9 @@ def step_slice(
         marked[envs] = False
     outcome = core.step(mine["actions"], mine["evader_actions"] if learned else None)
     for name in OUTCOME_FIELDS:
-        mine[name][:] = getattr(outcome, name)
+        if name in mine:
+            mine[name][:] = getattr(outcome, name)
     mine["state"][:] = core._state
+    if core._headings is not None:
+        mine["headings"][:] = core._headings
     return outcome.events

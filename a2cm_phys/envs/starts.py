@@ -4,10 +4,11 @@ oracle takes its exact expectation.
 
 Random starts are uniform over the *valid* starts (:class:`~a2cm_phys.config.Start`): all
 agents drawn at once, the whole draw rejected and redrawn until it is valid, which keeps
-the law exactly uniform over the valid set. The draws are counter-based hashes of the
-episode seed (as the evader's, :mod:`.evaders.scripted`, in a stream of their own), so an
-episode's start is a pure function of its seed: the same in any batch, in any worker, and
-re-simulated by ``replay --verify`` from the seed the log already holds.
+the law exactly uniform over the valid set. On a grid with obstacles each agent is drawn
+from the free cells only (no agent starts on a blocked cell). The draws are counter-based
+hashes of the episode seed (as the evader's, :mod:`.evaders.scripted`, in a stream of their
+own), so an episode's start is a pure function of its seed: the same in any batch, in any
+worker, and re-simulated by ``replay --verify`` from the seed the log already holds.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 from ..config import ConfigError, Scenario
 from .core import default_start
 from .evaders.scripted import draws, mix64
+from .obstacles import clear_of_obstacles
 
 _STREAM = np.uint64(0x5354415254)  # "START": keeps these draws apart from the evader's
 _ATTEMPTS = 10_000
@@ -45,22 +47,36 @@ def _grid_valid(xy: np.ndarray, min_distance: float) -> np.ndarray:
 def _physics_valid(scenario: Scenario, xy: np.ndarray) -> np.ndarray:
     """``(K,)`` whether positions ``(K, N + 1, 2)`` (metres) are a valid start: pursuers'
     (axis-aligned) boxes apart, each pursuer at least ``min_evader_distance`` and clear of
-    the evader's circle (its box's circumcircle outside it)."""
+    the evader's circle (its box's circumcircle outside it), every body clear of the
+    obstacles."""
     ph, n = scenario.physics, scenario.pursuers
     gap = np.abs(xy[:, :n, None] - xy[:, None, :n])  # (K, N, N, 2)
     apart = np.any(gap >= ph.box_side, axis=-1) | np.eye(n, dtype=bool)
     dist = np.linalg.norm(xy[:, :n] - xy[:, n:], axis=-1)
     clear = max(scenario.start.min_evader_distance, ph.evader_radius + ph.box_side / np.sqrt(2))
-    return np.all(apart, axis=(1, 2)) & np.all(dist >= clear, axis=1)
+    valid = np.all(apart, axis=(1, 2)) & np.all(dist >= clear, axis=1)
+    if scenario.obstacles:
+        valid &= clear_of_obstacles(scenario, xy)
+    return valid
 
 
-def _candidates(scenario: Scenario, key: np.ndarray, attempt: int) -> np.ndarray:
-    """One candidate start ``(K, N + 1, 2)`` per key at redraw ``attempt``."""
+def free_cells(scenario: Scenario) -> np.ndarray:
+    """The cells ``x + size · y`` of a grid scenario that no obstacle blocks, ascending."""
+    return np.flatnonzero(~scenario.blocked_cells())
+
+
+def _candidates(
+    scenario: Scenario, key: np.ndarray, attempt: int, free: np.ndarray | None = None
+) -> np.ndarray:
+    """One candidate start ``(K, N + 1, 2)`` per key at redraw ``attempt``; on a grid each
+    agent's cell uniform over all cells, or over ``free`` (the free cells, with obstacles)."""
     n, size = scenario.pursuers, scenario.size
     t = np.full(len(key), attempt, dtype=np.int64)
     if scenario.mode == "grid":
-        cells = (draws(key, t, n + 1) >> np.uint64(11)) % np.uint64(size * size)
-        cells = cells.astype(np.int64)
+        count = size * size if free is None else len(free)
+        cells = ((draws(key, t, n + 1) >> np.uint64(11)) % np.uint64(count)).astype(np.int64)
+        if free is not None:
+            cells = free[cells]
         return np.stack([cells % size, cells // size], axis=-1)
     ph = scenario.physics
     margin = np.full(n + 1, ph.box_side / 2)  # unrotated boxes at the start
@@ -78,8 +94,9 @@ def random_starts(scenario: Scenario, seeds: np.ndarray) -> np.ndarray:
     grid = scenario.mode == "grid"
     out = np.zeros((len(seeds), scenario.pursuers + 1, 2), np.int64 if grid else np.float64)
     key, todo = mix64(seeds ^ _STREAM), np.arange(len(seeds))
+    free = free_cells(scenario) if grid and scenario.obstacles else None
     for attempt in range(_ATTEMPTS):
-        xy = _candidates(scenario, key[todo], attempt)
+        xy = _candidates(scenario, key[todo], attempt, free)
         if grid:
             ok = _grid_valid(xy, scenario.start.min_evader_distance)
         else:
@@ -113,17 +130,20 @@ def grid_start_chunks(scenario: Scenario, ordered: bool = True) -> Iterator[np.n
 
     ``ordered``: pursuers as distinct agents (every ordered tuple of cells); ``False``: one
     row per set of cells (sorted), for solvers whose pursuers are interchangeable: as every
-    ordering of a valid set is valid, uniform over sets is the same law.
+    ordering of a valid set is valid, uniform over sets is the same law. Cells an obstacle
+    blocks hold no agent.
     """
     if not scenario.start.random:
         yield default_start(scenario.size, scenario.pursuers)[None]
         return
     size, n = scenario.size, scenario.pursuers
     cells = np.stack(np.divmod(np.arange(size * size), size)[::-1], axis=-1)  # (C, 2) x, y
+    free = ~scenario.blocked_cells()
     pick = itertools.permutations if ordered else itertools.combinations
-    for e, evader in enumerate(cells):
+    for e in free_cells(scenario):
+        evader = cells[e]
         far = np.abs(cells - evader).sum(axis=-1) >= scenario.start.min_evader_distance
-        allowed = np.flatnonzero(far & (np.arange(size * size) != e))
+        allowed = np.flatnonzero(far & free & (np.arange(size * size) != e))
         tuples = np.array(list(pick(allowed, n)), dtype=np.int64).reshape(-1, n)
         if len(tuples):
             rows = np.concatenate([cells[tuples], np.broadcast_to(evader, (len(tuples), 1, 2))], 1)
@@ -135,7 +155,7 @@ def count_grid_starts(scenario: Scenario) -> int:
     if not scenario.start.random:
         return 1
     size = scenario.size
-    cells = np.stack(np.divmod(np.arange(size * size), size)[::-1], axis=-1)
+    cells = np.stack(np.divmod(free_cells(scenario), size)[::-1], axis=-1)
     far = np.abs(cells[:, None] - cells[None]).sum(axis=-1) >= scenario.start.min_evader_distance
     np.fill_diagonal(far, False)
     return sum(math.perm(int(k), scenario.pursuers) for k in far.sum(axis=1))

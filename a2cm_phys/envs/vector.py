@@ -39,7 +39,8 @@ class VecStep:
     ``obs`` are the observations to act on next (new episodes already started where one
     ended); ``final_obs`` equals ``obs`` except in rows that finished, where it holds the
     last observation of the finished episode. ``positions`` (and ``velocities`` in physics
-    mode) are the agents' positions at the end of this step, before any auto-reset.
+    mode, and the pursuers' ``headings`` ``(B, N, 2)`` with differential drive) are the
+    agents' at the end of this step, before any auto-reset.
     ``reward`` is the pursuers' team reward; ``evader_reward`` a learned evader's (``(B,)``
     float64, see :func:`~.core.evader_reward`), ``None`` with a scripted evader.
     ``episodes`` are the episodes this step finished, in the order of their games.
@@ -55,6 +56,7 @@ class VecStep:
     velocities: np.ndarray | None
     episodes: EpisodeBatch
     evader_reward: np.ndarray | None = None
+    headings: np.ndarray | None = None
 
 
 class VectorEnv:
@@ -162,6 +164,7 @@ class VectorEnv:
         self._tallies.add(out, evader_rewards)
         obs = self.observe() if self._sensing else core.observe()
         positions, velocities = core.positions(), core.velocities()
+        headings = self._headings()
         done = out.terminated | out.truncated
         episodes = self._no_episodes
         final_obs = obs
@@ -182,7 +185,12 @@ class VectorEnv:
             velocities=velocities,
             episodes=episodes,
             evader_reward=evader_rewards,
+            headings=headings,
         )
+
+    def _headings(self) -> np.ndarray | None:
+        """The pursuers' headings ``(B, N, 2)`` with differential drive, else ``None``."""
+        return self.core.headings() if self.scenario.differential else None
 
     def close(self) -> None:
         """Stop worker processes, if any; the env then refuses to step or reset."""

@@ -1,9 +1,21 @@
-"""The pymunk worlds of the physics core: one game's space, bodies, shapes, servos and contact
-tracking (:class:`World`), and the worlds of a batch of games stepped together
-(:class:`Worlds`).
+"""The pymunk world of one physics game: its space, bodies, shapes, servos and contact
+tracking (:class:`World`); the worlds of a batch of games stepped together are
+:mod:`.worlds`'.
 
-Walls are four static boxes outside ``[0, size]²`` (inner edges on the boundary), pursuers
-dynamic square boxes, the evader a dynamic disc, all with rotation locked. Each agent is
+Walls are four static boxes outside ``[0, size]²`` (inner edges on the boundary), the
+scenario's obstacles static boxes and discs inside it (:mod:`.obstacles`), pursuers
+dynamic square boxes, the evader a dynamic disc, all with rotation locked but for
+differential-drive pursuers (``physics.drive = "differential"``), whose rotation is free.
+Such a pursuer is turned by a torque-limited motor: before every substep it is given the
+torque that brings its angular velocity to the commanded turn rate within the substep, at
+most :func:`turn_torque` (:mod:`.drive`); chipmunk applies it before solving the contacts,
+which may then stop the turn, so a box is never turned into a wall. It also has a *rail*:
+a kinematic body outside the space like the control bodies, placed on the pursuer and
+turned to its heading before every substep, and a :class:`pymunk.PinJoint` (``max_bias =
+0``, unlimited force) from a point :data:`ACROSS` metres to the rail's left to the
+pursuer's centre. The rail does not move, and the pin holds the rate of change of that
+distance at zero: it forbids the pursuer's velocity across its heading, inside the
+solver, together with the contacts (a one-axis joint, cheaper than a groove). Each agent is
 driven by a *velocity servo* (pymunk's tank-example idiom): a kinematic control body given
 the commanded velocity, pinned to the agent by a :class:`pymunk.PivotJoint` with
 ``max_bias = 0`` (no position correction: it only matches velocities) and ``max_force =
@@ -21,26 +33,34 @@ go straight to chipmunk where they can (:data:`~.chipmunk.DIRECT_CALLS`).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable
 from enum import IntEnum
 from itertools import combinations
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pymunk
 
 from ..config import Scenario
 from .chipmunk import (
-    BodyMemory,
     accessor,
     body_addresses,
     contact_callbacks,
+    drive_addresses,
     handle_contacts,
     stepper,
     unhook,
 )
-from .contacts import AGENT_WALL, PURSUER_EVADER, PURSUER_PURSUER, ContactTracker, Pair
+from .contacts import (
+    AGENT_OBSTACLE,
+    AGENT_WALL,
+    PURSUER_EVADER,
+    PURSUER_PURSUER,
+    ContactTracker,
+    Pair,
+)
 from .core import agent_names
+from .obstacles import obstacle_shape
 
 
 class CollisionType(IntEnum):
@@ -51,6 +71,7 @@ class CollisionType(IntEnum):
     PURSUER = 1
     EVADER = 2
     WALL = 3
+    OBSTACLE = 4
 
 
 COLLISION_SLOP = 0.01
@@ -60,15 +81,50 @@ for pixels and would let 0.6 m boxes sink 10 cm into each other."""
 
 def pair_table(scenario: Scenario) -> list[list[Pair]]:
     """``table[i][j]``: the contact pair of shapes tagged ``i`` and ``j`` (agents ``0 … N``,
-    ``N + 1`` the wall), in canonical order: lower pursuer first, agents before the wall."""
-    names = [*agent_names(scenario), "wall"]
+    ``N + 1`` the wall, ``N + 2`` any obstacle), in canonical order: lower pursuer first,
+    agents before the wall and obstacles."""
+    names = [*agent_names(scenario), "wall", "obstacle"]
     n = scenario.pursuers
-    # The diagonal (a shape with itself) never touches; wall–wall pairs are not handled.
-    table: list[list[Pair]] = [[("", "", "")] * (n + 2) for _ in range(n + 2)]
+    # The diagonal (a shape with itself) never touches, nor do two static shapes: those
+    # pairs are not handled.
+    table: list[list[Pair]] = [[("", "", "")] * (n + 3) for _ in range(n + 3)]
     for i, j in combinations(range(n + 2), 2):
         kind = PURSUER_PURSUER if j < n else PURSUER_EVADER if j == n else AGENT_WALL
         table[i][j] = table[j][i] = (kind, names[i], names[j])
+    for i in range(n + 1):
+        table[i][n + 2] = table[n + 2][i] = (AGENT_OBSTACLE, names[i], "obstacle")
     return table
+
+
+ACROSS = 1e3
+"""How far (m) across its heading a pursuer's pin is anchored on its rail: so far that the
+pursuer's motion within a substep (a few centimetres) turns the pin's line by some 1e-5
+rad at most, while the anchor's rounding stays near 1e-13 m."""
+
+
+class Turning(NamedTuple):
+    """A differential-drive pursuer's per-body calls (:func:`~.chipmunk.accessor`): what
+    :class:`~.worlds.Worlds` reads and writes each substep where memory cannot be reached,
+    and what :meth:`World.rebuild` resets."""
+
+    velocity: Callable[[], Any]
+    rotation: Callable[[], Any]
+    position: Callable[[], Any]
+    angle: Callable[[], float]
+    spin: Callable[[], float]
+    set_velocity: Callable[[Any], None]
+    steer: Callable[[Any], None]
+    set_torque: Callable[[float], None]
+    turn_rail: Callable[[float], None]
+    place_rail: Callable[[Any], None]
+    set_angle: Callable[[float], None]
+    set_spin: Callable[[float], None]
+
+
+def turn_torque(scenario: Scenario) -> float:
+    """The turning motor's torque limit (N·m) of a differential-drive pursuer: the force
+    limit ``max_force`` at the box's edge, half a side from its centre."""
+    return scenario.physics.max_force * scenario.physics.box_side / 2
 
 
 class World:
@@ -81,14 +137,17 @@ class World:
     order, so an episode does not depend on the ones before it (bit-identity with a world
     that was never used is tested). What the reused objects carry is reset explicitly:
     positions and velocities, and chipmunk's position-correction velocity, which is cleared
-    by integrating positions over ``dt = 0``. Forces, angles and spins need nothing: no force
-    is ever applied and rotation is locked. Rebuilding this way costs a third to a half of
-    building every object anew and collecting the old ones, which is mostly pymunk's
-    per-object Python bookkeeping (measured in ``BENCHMARKS.md``).
+    by integrating positions over ``dt = 0``. Forces need nothing (none is ever applied), nor
+    do angles and spins where rotation is locked; a differential-drive pursuer's heading,
+    spin and commanded turn are set back to 0, and its turning servo is new too. Rebuilding
+    this way costs a third to a half of building every object anew and collecting the old
+    ones, which is mostly pymunk's per-object Python bookkeeping (measured in
+    ``BENCHMARKS.md``).
 
     Shapes keep pymunk's default friction and elasticity, both 0: agents slide along walls
     and each other without bouncing, and the servo plays the part of floor friction.
-    """
+
+    Over the layout test's size limit since issue 46 (``KEPT_LARGE``): to be split."""
 
     __slots__ = (
         "_callbacks",
@@ -102,12 +161,16 @@ class World:
         "bodies",
         "controls",
         "cp_space",
+        "drive_addresses",
+        "pins",
         "probes",
+        "rails",
         "servos",
         "space",
         "steering",
         "step",
         "tracker",
+        "turning",
     )
 
     def __init__(self, scenario: Scenario, xy: np.ndarray, table: list[list[Pair]]) -> None:
@@ -126,11 +189,19 @@ class World:
             wall.collision_type = CollisionType.WALL
             tags[wall] = n + 1
             self._walls.append(wall)
+        for obstacle in scenario.obstacles:  # static like the walls, added with them
+            block = obstacle_shape(obstacle, self._static)
+            block.collision_type = CollisionType.OBSTACLE
+            tags[block] = n + 2
+            self._walls.append(block)
+        differential = ph.drive == "differential"
+        turning_moment = pymunk.moment_for_box(ph.mass, (ph.box_side, ph.box_side))
         self.bodies: list[pymunk.Body] = []
         self._shapes: list[pymunk.Shape] = []
         self.controls: list[pymunk.Body] = []
         for i in range(n + 1):
-            body = pymunk.Body(ph.mass, float("inf"))
+            turns = differential and i < n
+            body = pymunk.Body(ph.mass, turning_moment if turns else float("inf"))
             if i < n:
                 shape: pymunk.Shape = pymunk.Poly.create_box(body, (ph.box_side, ph.box_side))
                 shape.collision_type = CollisionType.PURSUER
@@ -154,11 +225,36 @@ class World:
         ]
         self.addresses = body_addresses(self.bodies, self.controls)
         self._max_force = ph.max_force
+        self.drive_addresses = None
+        self.rails: list[pymunk.Body] = []
+        self.turning: list[Turning] = []  # differential drive: each pursuer's calls
+        if differential:
+            self.rails = [pymunk.Body(body_type=pymunk.Body.KINEMATIC) for _ in range(n)]
+            pursuers = self.bodies[:n], self.controls[:n], self.rails
+            self.drive_addresses = drive_addresses(self.bodies[:n], self.rails)
+            for body, control, rail in zip(*pursuers, strict=True):
+                self.turning.append(
+                    Turning(
+                        accessor(body, "velocity", write=False),
+                        accessor(body, "rotation_vector", write=False),
+                        accessor(body, "position", write=False),
+                        accessor(body, "angle", write=False),
+                        accessor(body, "angular_velocity", write=False),
+                        accessor(body, "velocity", write=True),
+                        accessor(control, "velocity", write=True),
+                        accessor(body, "torque", write=True),
+                        accessor(rail, "angle", write=True),
+                        accessor(rail, "position", write=True),
+                        accessor(body, "angle", write=True),
+                        accessor(body, "angular_velocity", write=True),
+                    )
+                )
         self.tracker = ContactTracker()
         self._callbacks = contact_callbacks(self.tracker, table, tags)
         self._hooked: Any = None  # the space's handler, when it calls C callbacks
         self.space: pymunk.Space | None = None
         self.servos: list[pymunk.PivotJoint] = []
+        self.pins: list[pymunk.PinJoint] = []
         self.rebuild(xy)
 
     def rebuild(self, xy: np.ndarray) -> None:
@@ -166,8 +262,14 @@ class World:
         old = self.space
         unhook(self._hooked)  # the removals below need not reach the tracker: it is cleared
         if old is not None:  # release the objects (pymunk's separate callbacks still fire)
-            old.remove(*self._walls, *self._shapes, *self.servos, *self.bodies)
+            joints = (*self.servos, *self.pins)
+            old.remove(*self._walls, *self._shapes, *joints, *self.bodies)
             old.remove(self._static)
+        for io in self.turning:  # before the shapes enter the space, which caches their pose
+            io.set_angle(0.0)  # heading 0 (+x, the transform follows), not spinning
+            io.set_spin(0.0)
+            io.set_torque(0.0)
+            io.turn_rail(0.0)
         space = pymunk.Space()
         space.collision_slop = COLLISION_SLOP
         space.add(self._static, *self._walls)
@@ -193,6 +295,15 @@ class World:
             servo.max_force = self._max_force
             space.add(body, shape, servo)
             self.servos.append(servo)
+        self.pins = []
+        k = len(self.rails)  # the differential-drive pursuers (none: holonomic)
+        for body, rail, io in zip(self.bodies[:k], self.rails, self.turning, strict=True):
+            io.place_rail(tuple(body.position))  # where every step's first substep puts it
+            # Blind to the pin's length (max_bias = 0): it only stops sideways motion.
+            pin = pymunk.PinJoint(rail, body, (0.0, ACROSS), (0.0, 0.0))
+            pin.max_bias = 0.0
+            space.add(pin)
+            self.pins.append(pin)
         self.tracker.clear()
         # One wildcard handler: the pairs that can touch are exactly the ones we record
         # (pursuer-pursuer, pursuer-evader, agent-wall; static walls never touch each
@@ -204,118 +315,3 @@ class World:
 
     def __del__(self) -> None:
         unhook(getattr(self, "_hooked", None))
-
-
-class Worlds:
-    """The worlds of ``num_envs`` physics games of one scenario, stepped together.
-
-    Holds one :class:`World` per game (``worlds[env]``), the worlds rebuilt ahead at the
-    default ``start`` for later restarts (spares: :meth:`build_spare`), and, where chipmunk's
-    memory can be reached (:data:`~.chipmunk.DIRECT_CALLS`), every game's body addresses
-    (``addresses``, ``(B, 3, N + 1, 2)``) and one memory view over them, so that a step
-    steers every servo with one numpy scatter and reads every body with one gather."""
-
-    def __init__(self, scenario: Scenario, num_envs: int, start: np.ndarray) -> None:
-        ph = scenario.physics
-        self._scenario = scenario
-        self._start = start
-        self._table = pair_table(scenario)
-        self._dt = ph.dt / ph.substeps
-        self._substeps = range(ph.substeps)
-        self.worlds = [World(scenario, start, self._table) for _ in range(num_envs)]
-        self._spares: list[World] = []  # worlds rebuilt at the default start in advance
-        self._retired: list[World] = []  # worlds replaced by spares, to be rebuilt as spares
-        self.addresses: np.ndarray | None = None
-        self._cp_step = getattr(pymunk.cp, "cpSpaceStep", None)
-        if self._cp_step is not None and all(
-            world.addresses is not None and world.cp_space is not None for world in self.worlds
-        ):
-            self.addresses = np.stack([world.addresses for world in self.worlds])
-            self._map()
-
-    def __getitem__(self, env: int) -> World:
-        return self.worlds[env]
-
-    def __iter__(self) -> Iterator[World]:
-        return iter(self.worlds)
-
-    def __len__(self) -> int:
-        return len(self.worlds)
-
-    def _map(self) -> None:
-        """(Re)make the memory view over every game's bodies and its read/write indices."""
-        assert self.addresses is not None
-        memory = BodyMemory(self.addresses)
-        index = memory.index(self.addresses)
-        self._memory = memory.view
-        self._read = index[:, :2]  # (B, position|velocity, agent, xy): the state's layout
-        self._write = index[:, 2]  # (B, agent, xy): the control bodies' velocities
-
-    def restart(self, envs: Sequence[int], starts: Sequence[np.ndarray | None]) -> None:
-        """Put every agent of games ``envs`` at rest in a new space (:meth:`World.rebuild`),
-        at the positions ``starts`` gives each (``None``: the default start, where a spare
-        world is taken instead when one is waiting)."""
-        swapped = False
-        for env, xy in zip(envs, starts, strict=True):
-            if xy is None and self._spares:
-                self._retired.append(self.worlds[env])
-                world = self.worlds[env] = self._spares.pop()
-                if self.addresses is not None:
-                    self.addresses[env] = world.addresses
-                    swapped = True
-            else:
-                self.worlds[env].rebuild(self._start if xy is None else xy)
-        if swapped:
-            self._map()
-
-    def build_spare(self) -> int:
-        """Rebuild one world at the default start for a later :meth:`restart` to take, and
-        return how many are waiting (see :meth:`~.physics.PhysicsCore.build_spare`)."""
-        if self._retired:
-            world = self._retired.pop()
-            world.rebuild(self._start)
-        else:
-            world = World(self._scenario, self._start, self._table)
-        self._spares.append(world)
-        return len(self._spares)
-
-    @property
-    def spare_worlds(self) -> int:
-        """How many worlds :meth:`build_spare` has prepared that no restart has taken yet."""
-        return len(self._spares)
-
-    def advance(self, velocities: np.ndarray, steps: list[int], state: np.ndarray) -> list[list]:
-        """Step every game one control period with the servo ``velocities`` ``(B, N + 1, 2)``,
-        write the bodies' positions and velocities to ``state`` ``(B, 2, N + 1, 2)`` and
-        return each game's contact events, ``steps`` being the games' step numbers.
-
-        Through the bodies' memory where it was found (one scatter steers every control
-        body, one gather reads every body), else per body through pymunk. The same numbers
-        either way: setting a kinematic body's velocity is only the store (chipmunk wakes
-        dynamic bodies alone), and games are independent, so steering all before stepping
-        any changes nothing."""
-        dt, substeps = self._dt, self._substeps
-        events = []
-        if self.addresses is not None:
-            self._memory[self._write] = velocities
-            space_step = self._cp_step
-            for world, step in zip(self.worlds, steps, strict=True):
-                space = world.cp_space
-                for _ in substeps:
-                    space_step(space, dt)
-                events.append(world.tracker.end_step(step))
-            state[:] = self._memory[self._read]
-            return events
-        flat = []
-        for world, row, step in zip(self.worlds, velocities.tolist(), steps, strict=True):
-            for steer, v in zip(world.steering, row, strict=True):
-                steer(v)
-            world_step = world.step
-            for _ in substeps:
-                world_step(dt)
-            events.append(world.tracker.end_step(step))
-            for probe in world.probes:
-                v = probe()
-                flat += v.x, v.y
-        state[:] = np.array(flat).reshape(state.shape)
-        return events

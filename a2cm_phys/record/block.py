@@ -59,6 +59,10 @@ class Block:
         if buf.vel is not None:
             self.vel = _take(buf.vel, flat)
             self.vel[starts] = _take(buf.svel, first)
+        self.hdg = None
+        if buf.hdg is not None:
+            self.hdg = _take(buf.hdg, flat)
+            self.hdg[starts] = _take(buf.shdg, first)
         flat = ranges(begin + 1, length) * games + np.repeat(env, length)
         self.act = _take(buf.act, flat)
         self.rew = _take(buf.rew, flat)
@@ -94,6 +98,8 @@ class Block:
             fields["evader_reward"] = json_array(self.erew)
         if self.vel is not None:
             fields["velocities"] = json_rows(self.vel.reshape(n, -1))
+        if self.hdg is not None:
+            fields["headings"] = json_rows(self.hdg.reshape(n, -1))
         if any(e is not None for e in self.events):
             fields["events"] = json.dumps(
                 [e or [] for e in self.events], separators=(",", ":"), default=json_value
@@ -121,4 +127,5 @@ class Block:
             events=None if self.events[0] is None else [tuple(e) for e in self.events[0]],
             evader_reward=None if self.erew is None else self.erew[:length],
             sensed=None if self.sensed is None else self.sensed[: length + 1],
+            headings=None if self.hdg is None else self.hdg[: length + 1],
         )

@@ -4,7 +4,9 @@ Each vector step is copied in with one slice assignment per field whatever the n
 games; a finished episode is later gathered out of them (see :mod:`.block`). Row 0 holds
 the state at the start of recording. Actions are ``(rows, B, N + 1)`` int64 moves, or
 ``(rows, B, N + 1, 2)`` float64 commands with continuous control (pursuers, then the
-evader), the values given to the env, unclipped.
+evader), the values given to the env, unclipped. With differential drive the pursuers'
+headings are kept as the velocities are (``hdg``, ``shdg``: ``(rows, B, N, 2)``, ``(cos θ,
+sin θ)``).
 """
 
 from __future__ import annotations
@@ -13,7 +15,10 @@ import numpy as np
 
 from ..envs.vector import VecStep, VectorEnv
 
-_FIELDS = ("pos", "spos", "vel", "svel", "act", "rew", "erew", "captured", "col", "wall")
+_FIELDS = (
+    *("pos", "spos", "vel", "svel", "hdg", "shdg"),
+    *("act", "rew", "erew", "captured", "col", "wall"),
+)
 
 
 class StepBuffers:
@@ -35,6 +40,9 @@ class StepBuffers:
         self.spos = np.zeros_like(self.pos)
         self.vel = None if vel is None else np.zeros((*shape, agents, 2), dtype=vel.dtype)
         self.svel = None if vel is None else np.zeros_like(self.vel)
+        hdg = core.headings() if vec_env.scenario.differential else None
+        self.hdg = None if hdg is None else np.zeros((*shape, agents - 1, 2))
+        self.shdg = None if hdg is None else np.zeros_like(self.hdg)
         continuous = vec_env.scenario.continuous
         self.act = (
             np.zeros((*shape, agents, 2), dtype=np.float64)
@@ -49,6 +57,8 @@ class StepBuffers:
         self.pos[0] = self.spos[0] = pos
         if vel is not None:
             self.vel[0] = self.svel[0] = vel
+        if hdg is not None:
+            self.hdg[0] = self.shdg[0] = hdg
 
     @property
     def continuous(self) -> bool:
@@ -68,6 +78,8 @@ class StepBuffers:
         self.wall[r] = out.wall_contacts
         if self.vel is not None:
             self.vel[r] = step.velocities
+        if self.hdg is not None:
+            self.hdg[r] = step.headings
         if self.erew is not None:
             self.erew[r] = step.evader_reward
 
@@ -77,6 +89,8 @@ class StepBuffers:
         self.spos[r] = core.positions()
         if self.svel is not None:
             self.svel[r] = core.velocities()
+        if self.shdg is not None:
+            self.shdg[r] = core.headings()
 
     def keep(self, first: int, last: int) -> None:
         """Move rows ``first … last`` to the top (older rows are no longer needed)."""

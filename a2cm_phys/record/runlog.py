@@ -37,7 +37,9 @@ class Trajectory:
     per step (``None`` with a scripted evader, or in a log older than format 2). ``sensed``
     holds each state's sensing masks (SPEC §6b; ``[k, i, j]``: agent ``i`` knows body ``j``
     in state ``k``), in logs of sensing scenarios written since the masks were logged
-    (``None`` otherwise; :func:`trajectory_masks` recomputes them)."""
+    (``None`` otherwise; :func:`trajectory_masks` recomputes them). ``headings`` are the
+    pursuers' ``(cos θ, sin θ)`` in each state, with differential drive (``None``
+    otherwise)."""
 
     episode: int
     env: int
@@ -54,6 +56,7 @@ class Trajectory:
     events: list[tuple[str, str, str, int]] | None = None  # physics only
     evader_reward: np.ndarray | None = None  # (L,) float64, learned evader only
     sensed: np.ndarray | None = None  # (L + 1, N + 1, N + 1) bool, sensing scenarios only
+    headings: np.ndarray | None = None  # (L + 1, N, 2) cos θ, sin θ; differential drive only
 
     @property
     def continuous(self) -> bool:
@@ -85,6 +88,9 @@ class Trajectory:
         collisions = np.asarray(doc["collisions"], dtype=np.int64)
         walls = np.asarray(doc["wall_contacts"], dtype=np.int64)
         events = doc.get("events")
+        hdg = doc.get("headings")
+        if hdg is not None:
+            hdg = np.asarray(hdg, dtype=np.float64).reshape(len(pos), agents - 1, 2)
         masks = doc.get("sensed")
         masks = None if masks is None else unpacked(np.asarray(masks, dtype=np.int64))
         out = []
@@ -108,6 +114,7 @@ class Trajectory:
                     events=None if events is None else [tuple(e) for e in events[j]],
                     evader_reward=None if evader_reward is None else evader_reward[c:d],
                     sensed=None if masks is None else masks[a:b],
+                    headings=None if hdg is None else hdg[a:b],
                 )
             )
         return out

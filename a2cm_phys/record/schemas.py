@@ -174,14 +174,24 @@ SENSED_FIELD: dict[str, Any] = _rows(
 )
 """The ``sensed`` field of a sensing scenario's trajectory blocks (:mod:`.masks`)."""
 
+HEADINGS_FIELD: dict[str, Any] = _rows(
+    "number", "differential drive only; state rows: the pursuers' cos θ0,sin θ0,…"
+)
+"""The ``headings`` field of a differential-drive scenario's trajectory blocks."""
+
 
 def trajectory_schema(scenario: Scenario) -> dict[str, Any]:
     """The trajectory schema of ``scenario``'s log: :data:`TRAJECTORY_SCHEMA`, with the
-    ``sensed`` field (required) when the scenario has sensing."""
-    if not scenario.sensing.on:
+    ``sensed`` field (required) when the scenario has sensing and ``headings`` with
+    differential drive; other logs keep the schema's bytes of before these fields."""
+    if not scenario.sensing.on and not scenario.differential:
         return TRAJECTORY_SCHEMA
-    schema = {**TRAJECTORY_SCHEMA, "required": [*TRAJECTORY_SCHEMA["required"], "sensed"]}
-    schema["properties"] = {**TRAJECTORY_SCHEMA["properties"], "sensed": SENSED_FIELD}
+    schema = {**TRAJECTORY_SCHEMA, "properties": dict(TRAJECTORY_SCHEMA["properties"])}
+    if scenario.differential:
+        schema["properties"]["headings"] = HEADINGS_FIELD
+    if scenario.sensing.on:
+        schema["required"] = [*TRAJECTORY_SCHEMA["required"], "sensed"]
+        schema["properties"]["sensed"] = SENSED_FIELD
     return schema
 
 

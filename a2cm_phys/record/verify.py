@@ -5,7 +5,8 @@ in the log: the pursuers' (moves, or continuous commands fed back exactly as the
 given, so the env clips them again the same way), and a learned evader's (given as the
 step's ``evader_actions``). It is compared step by step (positions, velocities, the evader's
 actions, rewards, a learned evader's rewards, captures, collisions, wall contacts, contact
-events, the episode's end, and in a sensing scenario's log the sensing masks, recomputed
+events, the episode's end, the pursuers' headings where the log holds them (differential
+drive), and in a sensing scenario's log the sensing masks, recomputed
 from the re-simulated positions with :func:`a2cm_phys.envs.sensing.sensed`), bit for bit;
 then the episode's summary is checked against the trajectory (env, seed, length, return,
 a learned evader's return, captured, truncated, ended by a collision, collisions, wall
@@ -87,6 +88,10 @@ def _resimulate(
     if physics:
         sim["velocities"] = np.zeros_like(traj.velocities)
         sim["velocities"][0] = core.velocities()[0]
+    turning = traj.headings is not None and scenario.differential
+    if turning:
+        sim["headings"] = np.zeros_like(traj.headings)
+        sim["headings"][0] = core.headings()[0]
     sim["positions"][0] = core.positions()[0]
     sim_events: list[tuple] = []
     actions = np.ascontiguousarray(traj.actions[:, :n])
@@ -97,6 +102,8 @@ def _resimulate(
         sim["positions"][k + 1] = core.positions()[0]
         if physics:
             sim["velocities"][k + 1] = core.velocities()[0]
+        if turning:
+            sim["headings"][k + 1] = core.headings()[0]
         sim["evader action"][k] = out.evader_action[0]
         sim["reward"][k] = out.reward[0]
         if check_evader_reward:
@@ -120,6 +127,7 @@ def _logged(traj: Trajectory, pursuers: int) -> dict[str, np.ndarray | None]:
     return {
         "positions": traj.positions,
         "velocities": traj.velocities,
+        "headings": traj.headings,
         "evader action": traj.actions[:, pursuers],
         "reward": traj.reward,
         "evader reward": traj.evader_reward,
@@ -130,7 +138,7 @@ def _logged(traj: Trajectory, pursuers: int) -> dict[str, np.ndarray | None]:
     }
 
 
-_STATES = ("positions", "velocities", "sensing masks")
+_STATES = ("positions", "velocities", "headings", "sensing masks")
 """The values compared per state (row 0 the start), not per step."""
 
 

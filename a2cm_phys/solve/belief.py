@@ -7,8 +7,9 @@ pursuers' cells (the sampler is uniform over valid starts, so the evader is unif
 its valid cells given the pursuers'), and each step of the game updates it in three parts:
 
 1. **predict** through the scripted evader's known move law: uniform over the scenario's
-   ``actions`` (``random``) or always stay (``static``); a move off the arena leaves it on
-   its cell (the rules' own move table, :class:`~a2cm_phys.envs.grid.GridRules`);
+   ``actions`` (``random``) or always stay (``static``); a move off the arena or into a
+   cell an obstacle blocks leaves it on its cell (the rules' own move table,
+   :class:`~a2cm_phys.envs.grid.GridRules`);
 2. **no capture**: the episode went on, so the evader met no pursuer in the step (the
    rules' :func:`~a2cm_phys.envs.grid.meet`: the same end cell, or swapped cells), from
    the pursuers' cells at the step's start and end;
@@ -24,7 +25,7 @@ team), so with ``share = false`` it knows more than any one pursuer does.
 
 If the sightings contradict the model (an evader other than the one modelled, or placed
 elsewhere than the start), the belief would vanish; it then falls back to uniform over the
-cells no pursuer senses.
+free cells no pursuer senses.
 """
 
 from __future__ import annotations
@@ -87,6 +88,7 @@ class EvaderFilter:
         self.n_cells = c = scenario.size**2
         self.moves = evader_moves(scenario)
         self.emove = rules.move.reshape(c, 5)[:, self.moves].astype(np.int64)  # (C, nb)
+        self.free = ~rules.blocked_cell  # (C,): cells no obstacle blocks, the evader's
         xy = rules.cell_xy
         cheb = np.abs(xy[:, None, :] - xy[None, :, :]).max(-1)
         self.near = cheb <= float(scenario.sensing.radius)  # (C, C): within the radius
@@ -96,15 +98,16 @@ class EvaderFilter:
 
     def initial(self, pursuers: np.ndarray) -> np.ndarray:
         """Beliefs ``(B, C)`` at an episode's start, the pursuers at cells ``(B, N)``: the
-        evader's known start cell, or from random starts uniform over the cells at Manhattan
-        distance ``>= start.min_evader_distance`` from every pursuer (which no pursuer is on)."""
+        evader's known start cell, or from random starts uniform over the free cells at
+        Manhattan distance ``>= start.min_evader_distance`` from every pursuer (which no
+        pursuer is on)."""
         start = self.scenario.start
         if not start.random:
             out = np.zeros((len(pursuers), self.n_cells))
             out[:, self.start] = 1.0
             return out
         far = self.manhattan[pursuers] >= max(start.min_evader_distance, 1)  # (B, N, C)
-        out = far.all(axis=1).astype(np.float64)
+        out = (far.all(axis=1) & self.free).astype(np.float64)
         return out / out.sum(axis=1, keepdims=True)
 
     def predict(self, belief: np.ndarray, before: np.ndarray, after: np.ndarray) -> np.ndarray:
@@ -127,7 +130,7 @@ class EvaderFilter:
         total = out.sum(axis=1, keepdims=True)
         lost = total[:, 0] <= 0.0  # the model is contradicted: uniform over unsensed cells
         if lost.any():
-            out[lost] = np.where(sensed[lost], 0.0, 1.0)
+            out[lost] = np.where(sensed[lost] | ~self.free, 0.0, 1.0)
             out[lost & ~(out > 0).any(axis=1)] = 1.0
             total = out.sum(axis=1, keepdims=True)
         out /= total

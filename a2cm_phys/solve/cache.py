@@ -47,6 +47,14 @@ def cache_key(scenario: Scenario) -> str:
         "collisions": scenario.collisions.mode,
         "rewards": [rw.step, rw.collision, rw.capture, rw.wall],
     }
+    return _hash(scenario, fields)
+
+
+def _hash(scenario: Scenario, fields: dict) -> str:
+    """The key of ``fields``, with the cells the obstacles block (sorted indices) when
+    there are any, so that the keys of arenas without obstacles are those of before."""
+    if scenario.obstacles:
+        fields = {**fields, "blocked": np.flatnonzero(scenario.blocked_cells()).tolist()}
     return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -292,7 +300,7 @@ def value_cache_key(scenario: Scenario) -> str:
         "collisions": scenario.collisions.mode,
         "max_steps": scenario.max_steps,
     }
-    return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]
+    return _hash(scenario, fields)
 
 
 def _value_path(scenario: Scenario, cache_dir: str | Path | None) -> Path:

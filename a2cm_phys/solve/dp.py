@@ -6,12 +6,13 @@ step costs, so this is a stochastic shortest-path problem: value iteration from 
 converges to the optimum wherever termination can be forced with probability one.
 
 For the random and static evaders that is every state (pursuers can always walk to the
-evader; a random evader steps into a neighbouring pursuer with positive probability). A
-fleeing evader, or any evader law that skips some move somewhere
-(:attr:`~.model.GridModel.may_escape`), may be uncatchable (one pursuer on a small arena),
-so for it the states from which termination can be forced almost surely are found first,
-by the classic nested fixed point on the support of the transition law; the others get
-value ``-inf``.
+evader; a random evader steps into a neighbouring pursuer with positive probability). With
+obstacles, not for the static one: standing on a blocked cell (a state that never occurs,
+but is swept all the same) it is out of every pursuer's reach. A fleeing evader, or any
+evader law that skips some move somewhere (:attr:`~.model.GridModel.may_escape`), may be
+uncatchable (one pursuer on a small arena), so for it the states from which termination can
+be forced almost surely are found first, by the classic nested fixed point on the support
+of the transition law; the others get value ``-inf``.
 """
 
 from __future__ import annotations

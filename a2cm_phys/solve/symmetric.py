@@ -1,11 +1,12 @@
 """The grid oracle on large arenas: the exact optimum against the random (or static)
 evader over the canonical joint states only (issue 35).
 
-The game is invariant under the square's 8 symmetries and the pursuers' permutations
-(:mod:`.symmetry`), so the optimal value is constant on each orbit and a greedy joint
-action of a canonical state, mapped through the symmetry, is optimal at every state of its
-orbit. Storage: the canonical map (one int32 per joint state, the bulk of the memory) and
-a few arrays over the ``≈ C^(N+1) / (8 · N!)`` canonical states.
+The game is invariant under the square's 8 symmetries (with obstacles, those that keep the
+blocked cells) and the pursuers' permutations (:mod:`.symmetry`), so the optimal value is
+constant on each orbit and a greedy joint action of a canonical state, mapped through the
+symmetry, is optimal at every state of its orbit. Storage: the canonical map (one int32 per
+joint state, the bulk of the memory) and a few arrays over the ``≈ C^(N+1) / (G · N!)``
+canonical states (``G`` maps: 8 without obstacles).
 
 The algorithm is modified policy iteration on that quotient: a *greedy sweep*
 (:class:`~.symmetric_sweep.CanonicalBackup`, all ``A^N`` joint actions × evader moves of
@@ -45,14 +46,20 @@ MAX_EVALUATION_SWEEPS = 100
 """Evaluation sweeps at most between two greedy sweeps (an improper policy never settles)."""
 
 
+def symmetry_of(scenario: Scenario) -> Symmetry:
+    """The symmetry group of a grid scenario: the square's maps that keep its blocked cells
+    (all 8 without obstacles) and the pursuers' permutations (:class:`~.symmetry.Symmetry`)."""
+    return Symmetry(scenario.size, scenario.pursuers, scenario.blocked_cells())
+
+
 def memory_estimate(scenario: Scenario) -> float:
     """Estimated peak bytes of :func:`solve_symmetric` on ``scenario``.
 
     The canonical map (4 bytes per joint state), the canonical states' arrays (cells,
-    values, policy, reward, steps, successors; their count estimated as ``S / (8 · N!)``
+    values, policy, reward, steps, successors; their count estimated as ``S / (G · N!)``
     plus 10 %), one greedy chunk's temporaries and the interpreter's ~150 MB.
     """
-    sym = Symmetry(scenario.size, scenario.pursuers)
+    sym = symmetry_of(scenario)
     n, nb = scenario.pursuers, scenario.actions
     canon = 1.1 * sym.n_states / sym.order
     per_canon = 4 * (n + 1) + 8 * 5 + 4 + 8 * nb
@@ -181,7 +188,7 @@ class SymmetricResult:
     def from_arrays(cls, scenario: Scenario, arrays: Mapping[str, np.ndarray]) -> SymmetricResult:
         """The solution :meth:`to_arrays` gave, its canonical map rebuilt (seconds at
         10x10); ``ValueError`` if the arrays are not of ``scenario``'s canonical states."""
-        index = Symmetry(scenario.size, scenario.pursuers).index()
+        index = symmetry_of(scenario).index()
         if not np.array_equal(index.keys, arrays["keys"]):
             raise ValueError("the arrays are not over this scenario's canonical states")
         (greedy, evaluations), (residual, seconds, need) = arrays["sweeps"], arrays["stats"]
@@ -248,7 +255,7 @@ def solve_symmetric(
     start = time.perf_counter()
     need = check_symmetric(scenario, memory_budget)
     tol = 1e-10 * abs(scenario.rewards.step) if tol is None else tol
-    index = Symmetry(scenario.size, scenario.pursuers).index(progress)
+    index = symmetry_of(scenario).index(progress)
     backup = CanonicalBackup(scenario, index)
     v = np.zeros(index.n + 1)
     greedy = evaluations = 0

@@ -8,9 +8,15 @@ interchangeable (the rules and every reward treat them alike), so their ``N!`` p
 are symmetries too. The group acting on joint states has ``8 · N!`` elements; the random
 evader's law (uniform over the moves) and the static one (stay) are invariant under it.
 
+**Obstacles.** Cells an obstacle blocks break the square's symmetry: only the maps that
+carry the set of blocked cells onto itself (a subgroup, at least the identity) map the
+game onto itself, moves into a blocked cell onto moves into a blocked cell. The group then
+has ``G · N!`` elements for the ``G`` maps kept. States with an agent on a blocked cell
+never occur and are left out like those with a pursuer on the evader.
+
 **Canonical states.** A joint state's *key* under a map ``g`` is the joint-state index
 (pursuers, then the evader, :mod:`.tables`' layout) of its image with the pursuers' cells
-sorted ascending; its *canonical key* is the least key over the 8 maps. States with one
+sorted ascending; its *canonical key* is the least key over the group's maps. States with one
 canonical key form an orbit and share their optimal value; the canonical states are those
 whose index is their own canonical key, numbered ``0 … n − 1`` in increasing order
 (:class:`CanonicalIndex`). States with a pursuer on the evader's cell never occur (the
@@ -64,24 +70,34 @@ def sort_network(rows: list[np.ndarray]) -> list[np.ndarray]:
 
 
 class Symmetry:
-    """The symmetry group of the ``size × size`` game with ``pursuers`` pursuers.
+    """The symmetry group of the ``size × size`` game with ``pursuers`` pursuers and the
+    cells ``blocked`` (``(size²,)`` bool, or ``None``: no obstacles) an obstacle blocks.
 
-    ``cell_maps`` and ``action_maps`` are :func:`geometric_maps`'; ``action_inverse[g]``
-    undoes ``action_maps[g]``. Cells arrays are agent-major ``(N + 1, K)`` (pursuers, then
-    the evader), as in :mod:`.tables`.
+    ``cell_maps`` and ``action_maps`` are those of :func:`geometric_maps` that carry the
+    blocked cells onto themselves (all 8 without obstacles), in its order; map 0 is the
+    identity. ``action_inverse[g]`` undoes ``action_maps[g]``. Cells arrays are agent-major
+    ``(N + 1, K)`` (pursuers, then the evader), as in :mod:`.tables`.
     """
 
-    def __init__(self, size: int, pursuers: int) -> None:
+    def __init__(self, size: int, pursuers: int, blocked: np.ndarray | None = None) -> None:
         self.size, self.n = size, pursuers
         self.n_cells = size * size
         self.n_states = self.n_cells ** (pursuers + 1)
-        self.cell_maps, self.action_maps = geometric_maps(size)
+        cell_maps, action_maps = geometric_maps(size)
+        self.blocked = np.zeros(self.n_cells, dtype=bool) if blocked is None else blocked
+        keep = np.all(self.blocked[cell_maps] == self.blocked, axis=1)
+        self.cell_maps, self.action_maps = cell_maps[keep], action_maps[keep]
         self.action_inverse = np.argsort(self.action_maps, axis=1)
 
     @property
+    def maps(self) -> int:
+        """Number of geometric maps in the group (8 without obstacles)."""
+        return len(self.cell_maps)
+
+    @property
     def order(self) -> int:
-        """Number of elements of the group: ``8 · N!``."""
-        return 8 * int(np.prod(np.arange(1, self.n + 1)))
+        """Number of elements of the group: ``G · N!`` for the :attr:`maps` ``G``."""
+        return self.maps * int(np.prod(np.arange(1, self.n + 1)))
 
     def encode(self, cells: list[np.ndarray] | np.ndarray, dtype: type = np.int64) -> np.ndarray:
         """Joint-state indices ``((p_0 · C + p_1) · C + …) · C + e`` of cell rows."""
@@ -102,9 +118,9 @@ class Symmetry:
         return self.encode([*rows, m[cells[self.n]]], dtype)
 
     def canonical_key(self, cells: np.ndarray, dtype: type = np.int64) -> np.ndarray:
-        """The least :meth:`key` over the 8 maps: the same for every state of an orbit."""
+        """The least :meth:`key` over the maps: the same for every state of an orbit."""
         best = self.key(cells, 0, dtype)
-        for g in range(1, 8):
+        for g in range(1, self.maps):
             np.minimum(best, self.key(cells, g, dtype), out=best)
         return best
 
@@ -115,7 +131,7 @@ class Symmetry:
         pursuer among the image's sorted pursuers (ties broken by pursuer order).
         """
         cells = np.asarray(cells, dtype=np.int64)
-        keys = np.stack([self.key(cells, g) for g in range(8)])
+        keys = np.stack([self.key(cells, g) for g in range(self.maps)])
         g = keys.argmin(axis=0)
         images = self.cell_maps[g[None, :], cells[: self.n]]
         rank = np.argsort(np.argsort(images, axis=0, kind="stable"), axis=0, kind="stable")
@@ -139,7 +155,8 @@ class CanonicalIndex:
 
     ``keys (n,)`` are the canonical states' joint-state indices in increasing order,
     ``cells (N + 1, n)`` int32 their cells (pursuers sorted), ``ids (S,)`` int32 every joint
-    state's canonical id (``n``, the sentinel, where a pursuer stands on the evader).
+    state's canonical id (``n``, the sentinel, where a pursuer stands on the evader or an
+    agent on a blocked cell).
     """
 
     symmetry: Symmetry
@@ -175,6 +192,8 @@ def build_index(sym: Symmetry, progress: bool = False) -> CanonicalIndex:
                 rest, cells[i] = np.divmod(rest, sym.n_cells)
             key = sym.canonical_key(cells, np.int32)
             valid = np.all(cells[:n] != cells[n], axis=0)
+            if sym.blocked.any():
+                valid &= ~np.any(sym.blocked[cells], axis=0)
             found.append(index[valid & (key == index)])
             key[~valid] = -1
             ids[lo:hi] = key

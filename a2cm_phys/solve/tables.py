@@ -16,7 +16,8 @@ pursuers, ``K = 1`` for the evader) is a float64 array of shape ``(S, K, M)``::
 - Agents of a team act independently given the state (a product distribution): the
   joint law of the pursuers is ``Π_k table[s, k, a_k]``.
 - Rows of states in which a pursuer stands on the evader are never read (such a state has
-  already ended the episode); the builders below fill them like any other row.
+  already ended the episode), nor those of states with an agent on a cell an obstacle
+  blocks (they never occur); the builders below fill them like any other row.
 
 A trained model's actors give a table directly: :func:`model_table` evaluates any
 object with the method ``action_probs_np(obs) -> (B, K, A)`` (pursuers' actor–critic, a
@@ -70,9 +71,13 @@ def state_of_cells(scenario: Scenario, cells: np.ndarray) -> np.ndarray:
 
 
 def valid_states(scenario: Scenario) -> np.ndarray:
-    """``(S,)`` mask of states that can occur: no pursuer on the evader's cell."""
+    """``(S,)`` mask of states that can occur: no pursuer on the evader's cell, and no agent
+    on a cell an obstacle blocks (no start puts one there, no move enters one)."""
     cells = state_cells(scenario)
-    return ~np.any(cells[:-1] == cells[-1], axis=0)
+    valid = ~np.any(cells[:-1] == cells[-1], axis=0)
+    if scenario.obstacles:
+        valid &= ~np.any(scenario.blocked_cells()[cells], axis=0)
+    return valid
 
 
 def state_index(scenario: Scenario, positions: np.ndarray) -> np.ndarray:

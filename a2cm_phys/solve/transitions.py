@@ -152,12 +152,19 @@ class GridTables:
         Not for the uniform and static evaders: pursuers walk up to a static evader, and an
         evader playing each of the ``actions`` moves with positive probability in every
         state sometimes steps into (or swaps with) an adjacent pursuer. Any other law might.
+        With obstacles, only the uniform evader over every move is sure to be caught from
+        every state: also from those that never occur (an agent on a blocked cell, which
+        the value iteration sweeps too), where no pursuer can walk up to an evader that
+        does not leave its blocked cell.
         """
-        if self.weights is None:
-            return False
         own = self.evader_moves < self.n_actions
+        every_move = own.sum() == self.n_actions
+        if self.weights is None:
+            return bool(self.rules.blocked_cell.any()) and not every_move
+        if self.rules.blocked_cell.any():
+            return True
         every = bool(np.all(self.weights[self.valid()][:, own] > 0))
-        return not (own.sum() == self.n_actions and every)
+        return not (every_move and every)
 
     @property
     def n_moves(self) -> int:

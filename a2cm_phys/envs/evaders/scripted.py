@@ -66,14 +66,20 @@ def flee_actions(
     n_actions: int,
     low: float,
     high: float,
+    blocked: np.ndarray | None = None,
 ) -> np.ndarray:
     """The move maximising the Manhattan distance to the nearest pursuer after the move.
 
     ``evader_xy`` is ``(B, 2)``, ``pursuer_xy`` ``(B, N, 2)`` (the pursuers' positions at the
     start of the step: moves are simultaneous). Moves are clipped to ``[low, high]`` as the
     arena does. Ties are broken uniformly at random by a random rank per action.
+
+    ``blocked`` (grid only): the cells obstacles block, ``(size, size)`` bool indexed
+    ``[y, x]`` (:func:`blocked_grid`); a move from a free cell into one stays put, as in
+    :class:`~a2cm_phys.envs.grid.GridRules`. ``None``: no cell is blocked (physics, where
+    the obstacles' shapes stop the evader).
     """
-    return flee_moves(draw(seed, t), evader_xy, pursuer_xy, n_actions, low, high)
+    return flee_moves(draw(seed, t), evader_xy, pursuer_xy, n_actions, low, high, blocked)
 
 
 def flee_moves(
@@ -83,15 +89,35 @@ def flee_moves(
     n_actions: int,
     low: float,
     high: float,
+    blocked: np.ndarray | None = None,
 ) -> np.ndarray:
     """:func:`flee_actions` given the step's draws ``drawn = draw(seed, t)``."""
     deltas = _DELTAS_F[:n_actions]
     cand = np.clip(evader_xy[:, None, :] + deltas[None], low, high)  # (B, A, 2)
+    if blocked is not None:
+        cand = _stay_out(cand, evader_xy, blocked)
     dist = np.abs(cand[:, :, None, :] - pursuer_xy[:, None, :, :]).sum(-1).min(-1)  # (B, A)
     rank = (_lanes(drawn, n_actions) >> np.uint64(12)).astype(np.float64) / 2.0**52
     best = dist.max(axis=1, keepdims=True)
     score = np.where(np.isclose(dist, best, rtol=0.0, atol=1e-9), rank, -1.0)
     return score.argmax(axis=1).astype(np.int64)
+
+
+def blocked_grid(scenario: Scenario) -> np.ndarray | None:
+    """The cells a grid scenario's obstacles block as :func:`flee_actions` takes them,
+    ``(size, size)`` bool indexed ``[y, x]``; ``None`` without any (and in physics mode)."""
+    if scenario.mode != "grid" or not scenario.obstacles:
+        return None
+    return scenario.blocked_cells().reshape(scenario.size, scenario.size)
+
+
+def _stay_out(cand: np.ndarray, evader_xy: np.ndarray, blocked: np.ndarray) -> np.ndarray:
+    """Candidate cells ``(B, A, 2)`` (integer-valued floats, grid), each blocked one replaced
+    by the evader's own cell ``(B, 2)``, unless that is blocked too (the rules' moves)."""
+    x, y = cand[..., 0].astype(np.int64), cand[..., 1].astype(np.int64)
+    ex, ey = evader_xy[:, 0].astype(np.int64), evader_xy[:, 1].astype(np.int64)
+    stays = blocked[y, x] & ~blocked[ey, ex][:, None]
+    return np.where(stays[..., None], evader_xy[:, None, :], cand)
 
 
 def evader_actions(
@@ -106,8 +132,9 @@ def evader_actions(
     """The evader's action in every game, by the scenario's evader policy.
 
     Positions (``(B, 2)`` and ``(B, N, 2)``) are read only by ``flee`` and may be ``None``
-    otherwise; ``[low, high]`` is the range the arena clips positions to. This is
-    :class:`Evader` without look-ahead: each call hashes step ``t`` itself.
+    otherwise; ``[low, high]`` is the range the arena clips positions to (and on a grid,
+    cells the obstacles block are avoided, :func:`blocked_grid`). This is :class:`Evader`
+    without look-ahead: each call hashes step ``t`` itself.
     """
     evader = Evader(scenario, len(seed), low, high, horizon=1)
     return evader.moves(seed, t, evader_xy, pursuer_xy)
@@ -137,6 +164,7 @@ class Evader:
         self.policy, self.n_actions = scenario.evader, scenario.actions
         self.needs_positions = self.policy == "flee"  # the others ignore positions
         self.low, self.high = low, high
+        self.blocked = blocked_grid(scenario)  # grid obstacles; physics shapes stop it there
         self.horizon = horizon or max(1, min(64, 4096 // max(num_envs, 1)))
         random = self.policy == "random"  # store the moves themselves, else the draws
         self._ahead = np.zeros((num_envs, self.horizon), np.int64 if random else np.uint64)
@@ -174,7 +202,9 @@ class Evader:
         self._next += 1
         if self.policy == "random":
             return column
-        return flee_moves(column, evader_xy, pursuer_xy, self.n_actions, self.low, self.high)
+        return flee_moves(
+            column, evader_xy, pursuer_xy, self.n_actions, self.low, self.high, self.blocked
+        )
 
 
 _DELTAS_F = np.array([(0, 1), (0, -1), (-1, 0), (1, 0), (0, 0)], dtype=np.float64)

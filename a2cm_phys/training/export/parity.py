@@ -52,7 +52,8 @@ class Parity:
 
 def sample_observations(scenario: Scenario, n: int, seed: int = 0) -> np.ndarray:
     """``n`` observations ``(n, obs_dim)`` float32 spread over what the env can give: random
-    cells on grids; random positions, and velocities up to ``max_speed``, in physics."""
+    cells on grids; random positions, and velocities up to ``max_speed``, in physics (and
+    random headings with differential drive)."""
     rng = np.random.default_rng(seed)
     agents = scenario.pursuers + 1
     if scenario.mode == "grid":
@@ -60,7 +61,11 @@ def sample_observations(scenario: Scenario, n: int, seed: int = 0) -> np.ndarray
         return (cells / (scenario.size - 1)).astype(np.float32)
     positions = rng.uniform(0.0, 1.0, size=(n, 2 * agents))
     velocities = rng.uniform(-1.0, 1.0, size=(n, 2 * agents))
-    return np.concatenate([positions, velocities], axis=1).astype(np.float32)
+    parts = [positions, velocities]
+    if scenario.differential:  # the pursuers' headings (cos θ, sin θ)
+        angle = rng.uniform(-np.pi, np.pi, size=(n, scenario.pursuers))
+        parts.append(np.stack([np.cos(angle), np.sin(angle)], axis=-1).reshape(n, -1))
+    return np.concatenate(parts, axis=1).astype(np.float32)
 
 
 def _torch_outputs(model: ActorCritic, obs: np.ndarray) -> list[np.ndarray]:
