@@ -18,6 +18,7 @@ segment between the two centres crosses an obstacle.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -94,7 +95,10 @@ def _wall_hits(origin: np.ndarray, direction: np.ndarray, size: float) -> np.nda
     return np.maximum(np.minimum(t[..., 0], t[..., 1]), 0.0)
 
 
-def _obstacle_arrays(obstacles: Sequence[Obstacle]) -> tuple[np.ndarray, ...]:
+@functools.cache
+def _obstacle_arrays(obstacles: tuple[Obstacle, ...]) -> tuple[np.ndarray, ...]:
+    """The obstacles as arrays: box centres and half sizes, circle centres and radii
+    (computed once per layout: the layout is fixed for a scenario)."""
     boxes = [o for o in obstacles if o.shape == "box"]
     circles = [o for o in obstacles if o.shape == "circle"]
     return (
@@ -103,6 +107,21 @@ def _obstacle_arrays(obstacles: Sequence[Obstacle]) -> tuple[np.ndarray, ...]:
         np.array([(o.x, o.y) for o in circles], dtype=np.float64).reshape(-1, 2),
         np.array([o.radius for o in circles], dtype=np.float64),
     )
+
+
+def _obstacle_hits(
+    origin: np.ndarray, direction: np.ndarray, obstacles: tuple[Obstacle, ...]
+) -> np.ndarray:
+    """Distance along unit rays ``(..., 2)`` to the first obstacle; ``inf`` where none."""
+    box_c, box_h, circle_c, circle_r = _obstacle_arrays(obstacles)
+    first = np.full(np.broadcast_shapes(origin.shape, direction.shape)[:-1], np.inf)
+    if len(box_c):
+        hits = _box_hits(origin[..., None, :], direction[..., None, :], box_c, box_h, None)
+        first = np.minimum(first, hits.min(-1))
+    if len(circle_c):
+        hits = _circle_hits(origin[..., None, :], direction[..., None, :], circle_c, circle_r)
+        first = np.minimum(first, hits.min(-1))
+    return first
 
 
 def cast_rays(
@@ -142,14 +161,7 @@ def cast_rays(
     disc = _circle_hits(origin, direction, xy[:, None, None, n, :], np.float64(evader_radius))
     disc[:, n] = np.inf  # the evader's own disc
     best = np.minimum(best, disc)
-    box_c, box_h, circle_c, circle_r = _obstacle_arrays(obstacles)
-    if len(box_c):
-        hits = _box_hits(origin[..., None, :], direction[..., None, :], box_c, box_h, None)
-        best = np.minimum(best, hits.min(-1))
-    if len(circle_c):
-        hits = _circle_hits(origin[..., None, :], direction[..., None, :], circle_c, circle_r)
-        best = np.minimum(best, hits.min(-1))
-    return best
+    return np.minimum(best, _obstacle_hits(origin, direction, tuple(obstacles)))
 
 
 def visible(positions: np.ndarray, obstacles: Sequence[Obstacle]) -> np.ndarray:
@@ -161,12 +173,4 @@ def visible(positions: np.ndarray, obstacles: Sequence[Obstacle]) -> np.ndarray:
     safe = np.where(length > 0, length, 1.0)
     direction = gap / safe[..., None]
     origin = np.broadcast_to(xy[:, :, None, :], gap.shape)
-    first = np.full(length.shape, np.inf)
-    box_c, box_h, circle_c, circle_r = _obstacle_arrays(obstacles)
-    if len(box_c):
-        hits = _box_hits(origin[..., None, :], direction[..., None, :], box_c, box_h, None)
-        first = np.minimum(first, hits.min(-1))
-    if len(circle_c):
-        hits = _circle_hits(origin[..., None, :], direction[..., None, :], circle_c, circle_r)
-        first = np.minimum(first, hits.min(-1))
-    return first >= length
+    return _obstacle_hits(origin, direction, tuple(obstacles)) >= length
