@@ -4,11 +4,13 @@ each against its reference (the exact optimum over the starts on a grid, the ada
 
     python benchmarks/bench_obstacles.py [--jobs grid_obstacles,phys_diff] [--seeds 0-4]
         [--episodes 5000] [--out benchmarks/results/obstacles.jsonl]
+    python benchmarks/bench_obstacles.py --table benchmarks/results/obstacles.jsonl
 
 Each run is the shipped ``train`` command with the options its job names (below), and each
 evaluation ``evaluate RUN --greedy`` over ``--episodes`` episodes (seed 0), whose reference
 is the scenario's own. Prints a Markdown table of medians over seeds; appends every run's
-figures to ``--out`` as one JSON line.
+figures to ``--out`` as one JSON line; ``--table FILE`` prints the table of rows saved
+earlier (the last row of each job, algorithm and seed).
 """
 
 from __future__ import annotations
@@ -54,24 +56,55 @@ def evaluate(run_dir: Path, episodes: int) -> dict:
     cmd = [sys.executable, "-m", "a2cm_phys.evaluate", str(run_dir), "--greedy", "--json"]
     cmd += ["--episodes", str(episodes), "--no-progress"]
     doc = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
+    reference = doc["reference"]["capture_steps"]  # exact: a number; played: statistics
     return {
         "steps": doc["capture_steps"]["mean"]["value"],
         "capture_rate": doc["capture_rate"]["value"],
         "collisions": doc["collisions_per_episode"]["value"],
-        "reference": doc["reference"]["capture_steps"],
+        "reference": reference if isinstance(reference, float) else reference["mean"]["value"],
         "reference_name": doc["reference"]["policy"],
+        "reference_capture_rate": doc["reference"].get("capture_rate", {}).get("value", 1.0),
     }
 
 
+def table(rows: list[dict]) -> str:
+    """The Markdown table of ``rows``: medians over seeds per job and algorithm."""
+    lines = [
+        "| scenario | algo | seeds | greedy steps (median) | reference | ratio (median) | ratios |"
+        " captured (min) | collisions/ep (max) | wall s (median) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    groups = dict.fromkeys((r["job"], r["algo"]) for r in rows)
+    for job, algo in groups:
+        mine = [r for r in rows if r["job"] == job and r["algo"] == algo]
+        ratios = sorted(r["steps"] / r["reference"] for r in mine)
+        lines.append(
+            f"| `{job}` | {algo} | {len(mine)} |"
+            f" {statistics.median(r['steps'] for r in mine):.3f} |"
+            f" {mine[0]['reference']:.3f} | {statistics.median(ratios):.4f} |"
+            f" {', '.join(f'{x:.3f}' for x in ratios)} |"
+            f" {min(r['capture_rate'] for r in mine):.3f} |"
+            f" {max(r['collisions'] for r in mine):.4f} |"
+            f" {statistics.median(r['wall_s'] for r in mine):.1f} |"
+        )
+    return "\n".join(lines)
+
+
 def main() -> None:
-    """Train, evaluate, append the rows, print the table."""
+    """Train, evaluate, append the rows, print the table (or only print a saved one)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", default=",".join(JOBS))
     ap.add_argument("--algos", default="a2cm,a2c")
     ap.add_argument("--seeds", default="0-4")
     ap.add_argument("--episodes", type=int, default=5000)
     ap.add_argument("--out", default="benchmarks/results/obstacles.jsonl")
+    ap.add_argument("--table", metavar="FILE", help="print the table of saved rows and stop")
     args = ap.parse_args()
+    if args.table:
+        saved = [json.loads(line) for line in Path(args.table).read_text().splitlines()]
+        last = {(r["job"], r["algo"], r["seed"]): r for r in saved}
+        print(table(list(last.values())))
+        return
     rows = []
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -87,22 +120,7 @@ def main() -> None:
                     with out.open("a") as f:
                         f.write(json.dumps(row) + "\n")
                     print(json.dumps(row), file=sys.stderr, flush=True)
-    print(
-        "| scenario | algo | greedy steps (median) | reference | ratio (median) | ratios |"
-        " collisions/ep (max) | wall s (median) |"
-    )
-    print("|---|---|---|---|---|---|---|---|")
-    for job in args.jobs.split(","):
-        for algo in args.algos.split(","):
-            mine = [r for r in rows if r["job"] == job and r["algo"] == algo]
-            ratios = sorted(r["steps"] / r["reference"] for r in mine)
-            print(
-                f"| `{job}` | {algo} | {statistics.median(r['steps'] for r in mine):.3f} |"
-                f" {mine[0]['reference']:.3f} | {statistics.median(ratios):.4f} |"
-                f" {', '.join(f'{x:.3f}' for x in ratios)} |"
-                f" {max(r['collisions'] for r in mine):.3f} |"
-                f" {statistics.median(r['wall_s'] for r in mine):.1f} |"
-            )
+    print(table(rows))
 
 
 if __name__ == "__main__":

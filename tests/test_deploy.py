@@ -25,6 +25,8 @@ from a2cm_phys.deploy import (
     Actor,
     DeployError,
     Team,
+    clip_to_box,
+    clip_to_disc,
     load_team,
     pretrained_dir,
     pretrained_names,
@@ -165,6 +167,29 @@ def test_sampling_is_the_callers_generator_and_follows_the_softmax() -> None:
     many = cont.act(np.full((500, 16), 0.5, np.float32), np.random.default_rng(0), greedy=False)
     assert many.shape == (500, 3, 2) and np.unique(many[:, 0, 0]).size == 500
     assert (np.linalg.norm(many, axis=-1) <= 1 + 1e-6).all()
+
+
+def test_commands_are_limited_as_the_env_limits_them(tmp_path: Path) -> None:
+    far = np.full((50, 16), 3.0, np.float32)  # outside the arena: long commands
+    disc = Actor.load(pretrained_dir("phys_cont") / "pursuer_1.onnx")
+    box = Actor.load(pretrained_dir("phys_cont") / "pursuer_1.onnx", clip=clip_to_box)
+    mean = disc.outputs(far)["mean"]
+    assert (np.abs(mean) > 1).any()
+    np.testing.assert_array_equal(box.act(far), np.clip(mean, -1, 1))
+    np.testing.assert_allclose(
+        disc.act(far), mean / np.maximum(1, np.hypot(*mean.T))[:, None], atol=1e-6
+    )
+    folder = copy_of("phys_cont", tmp_path)  # what policy.json says picks the rule
+    policy = json.loads((folder / POLICY_FILE).read_text())
+    assert "drive" not in policy["actions"] and Team.load(folder).clip is clip_to_disc
+    policy["actions"]["drive"] = "differential"
+    (folder / POLICY_FILE).write_text(json.dumps(policy))
+    team = Team.load(folder)
+    assert team.clip is clip_to_box and team.actors["pursuer_1"].clip is clip_to_box
+    policy["actions"]["drive"] = "tracked"
+    (folder / POLICY_FILE).write_text(json.dumps(policy))
+    with pytest.raises(DeployError, match=r"actions\.drive 'tracked'"):
+        Team.load(folder)
 
 
 def copy_of(name: str, tmp_path: Path) -> Path:

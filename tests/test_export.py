@@ -23,7 +23,7 @@ from a2cm_phys.analysis.evaluation import play
 from a2cm_phys.analysis.stats import mean_and_se
 from a2cm_phys.commands.export import main
 from a2cm_phys.config import Scenario, build, load_scenario, load_train, resolve_train
-from a2cm_phys.deploy import POLICY_FILE, Team, read_policy
+from a2cm_phys.deploy import POLICY_FILE, Team, clip_to_box, clip_to_disc, read_policy
 from a2cm_phys.deploy.spec import REQUIRED
 from a2cm_phys.envs.parallel import make_env
 from a2cm_phys.envs.vector import VectorEnv
@@ -37,9 +37,10 @@ RUNS = {
     "phys-a2cm": ("phys_cont", {"algo": "a2cm"}),
     "phys-a2c": ("phys_cont", {"algo": "a2c", "layers": 2}),
     "grid-vs-a2cm": ("grid_vs", {"algo": "a2cm", "encoding": "onehot"}),
+    "diff-a2cm": ("phys_diff", {"algo": "a2cm"}),
 }
 """Tiny runs: both learners, both control types, one-hot cells, deeper actors, a learned
-evader."""
+evader, differential drive."""
 
 
 def train(path: Path, scenario_name: str, values: dict) -> Path:
@@ -146,6 +147,29 @@ def test_a_continuous_team_captures_alike(exported) -> None:
         assert abs(ma - mb) <= half + 1e-9, (ma, mb, half)
 
 
+def test_a_differential_team_drives_the_env_through_its_own_api(exported) -> None:
+    trained, team, _ = exported
+    scenario = trained.scenario
+    if not scenario.differential:
+        pytest.skip("differential drive")
+    obs = episode_observations(trained, 256)
+    actions = team.act(obs)  # (forward, turn) clipped to the box, as the env clips them
+    for i, agent in enumerate(team.pursuers):
+        mean = team.actors[agent].outputs(obs)["mean"]
+        np.testing.assert_array_equal(actions[:, i], np.clip(mean, -1.0, 1.0))
+    env = make_env(team.scenario["name"])
+    obs, _ = env.reset(seed=4)
+    steps = 0
+    while env.agents:
+        moves = team.act(obs)
+        theirs = np.clip(trained.pursuers.act(env.state(), None, greedy=True), -1.0, 1.0)
+        mine = np.stack([moves[a] for a in scenario.agents])
+        np.testing.assert_allclose(mine, theirs, atol=TOLERANCE)
+        obs, *_ = env.step(moves)
+        steps += 1
+    assert 0 < steps <= scenario.max_steps
+
+
 def test_policy_json_round_trips_and_names_what_a_user_needs(exported) -> None:
     trained, team, run = exported
     folder = run / "onnx"
@@ -157,15 +181,24 @@ def test_policy_json_round_trips_and_names_what_a_user_needs(exported) -> None:
     assert build(Scenario, policy["scenario"], "policy.json") == scenario
     obs = policy["observation"]
     assert obs["size"] == scenario.obs_dim == len(obs["layout"]) == len(obs["divided_by"])
-    assert obs["layout"][-2:] == (
+    velocities = obs["layout"][: scenario.obs_dim - 2 * scenario.pursuers * scenario.differential]
+    assert velocities[-2:] == (
         ["evader.x", "evader.y"] if scenario.mode == "grid" else ["evader.vx", "evader.vy"]
     )
     assert obs["encoding"]["kind"] == ("onehot" if trained.pursuers.encoding else "xy")
     actions = policy["actions"]
+    if scenario.differential:  # (forward, turn), and the headings after the velocities
+        assert actions["drive"] == "differential" and team.clip is clip_to_box
+        assert actions["max_turn_rate"] == scenario.physics.max_turn_rate
+        assert "[-1, 1]" in policy["greedy"]
+        headings = [f"{a}.{c}" for a in scenario.agents for c in ("cos", "sin")]
+        assert obs["layout"][-len(headings) :] == headings
+    elif scenario.continuous:
+        assert "drive" not in actions and team.clip is clip_to_disc
+        assert "unit circle" in policy["greedy"]
     if scenario.continuous:
         assert actions["max_speed"] == scenario.physics.max_speed
         assert actions["dt"] == scenario.physics.dt
-        assert "unit circle" in policy["greedy"]
     else:
         assert actions["meanings"][:2] == ["up (+y)", "down (-y)"]
         assert len(actions["meanings"]) == actions["count"] == scenario.actions

@@ -201,7 +201,6 @@ KEPT_LARGE: dict[str, str] = {
     "a2cm_phys/envs/world.py:__init__": "World's bodies, rails and obstacles (issue 46)",
     "a2cm_phys/envs/worlds.py:Worlds": "the substep-major loop of differential drive",
     "a2cm_phys/envs/workers.py:ProcessCore": "headings through shared memory (issue 46)",
-    "a2cm_phys/record/scene.py": "obstacles and turned boxes in the scenes (issue 46)",
 }
 """``path:name`` -> why it stays over its limit (its docstring says so too)."""
 

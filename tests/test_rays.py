@@ -3,14 +3,20 @@ queries on the same shapes."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pymunk
 import pytest
+from foxglove.messages import SceneUpdate
+from test_record import decode_scene
 
 from a2cm_phys.config import Obstacle, load_scenario
 from a2cm_phys.envs.rays import cast_rays, ray_angles, visible
-from a2cm_phys.envs.sensing import agent_slice, sensed
+from a2cm_phys.envs.render import render_rgb
+from a2cm_phys.envs.sensing import agent_slice, ray_segments, sensed
 from a2cm_phys.envs.vector import VectorEnv
+from a2cm_phys.record.scene import scene_update
 
 SIZE, SIDE, RADIUS, REACH = 5.0, 0.6, 0.3, 3.0
 OBSTACLES = (
@@ -159,3 +165,50 @@ def test_occlusion_hides_a_body_behind_an_obstacle_from_radius_sensing():
     assert plain[0, 0, 1] and plain[0, 1, 0]
     assert not hidden[0, 0, 1] and not hidden[0, 1, 0]
     assert (hidden <= plain).all() and hidden[0, 0, 2]
+
+
+def decoded(scene: SceneUpdate) -> object:
+    """A scene as Foxglove reads it: its protobuf bytes decoded with the SDK's schema."""
+    schema = SimpleNamespace(
+        id=1, name="foxglove.SceneUpdate", encoding="protobuf", data=SceneUpdate.get_schema().data
+    )
+    return decode_scene(schema, SimpleNamespace(message_encoding="protobuf"), scene.encode())
+
+
+def test_pictures_and_scenes_draw_each_pursuers_rays_where_they_stop():
+    """The rays drawn (Foxglove scene and GIF frame) end where the sensor's readings say,
+    turned by the headings; a scenario without rays draws none."""
+    sc = load_scenario("phys_diff_obstacles", {"sensing": {"radius": 2.0, "rays": 6}})
+    env = VectorEnv(sc, 1)
+    env.reset(5)
+    rng = np.random.default_rng(1)
+    for _ in range(12):
+        env.step(rng.uniform(-1, 1, (1, 3, 2)).astype(np.float32), validate=False)
+    positions, headings = env.core.positions()[0], env.core.headings()[0]
+    angle = np.arctan2(headings[:, 1], headings[:, 0])
+    reach = cast_rays(positions[None], angle[None], 6, sc.sensing.range, sc.size, 0.6, 0.3,
+                      sc.obstacles)[0, :3]  # fmt: skip
+    starts, ends = ray_segments(sc, positions, headings)
+    np.testing.assert_allclose(np.linalg.norm(ends - starts, axis=-1), reach, atol=1e-12)
+    first = (ends - starts)[:, 0] / reach[:, :1]  # ray 0 points along the heading
+    np.testing.assert_allclose(first, headings, atol=1e-12)
+    masks = np.asarray(sensed(sc, positions[None])[0])
+    scene = decoded(scene_update(sc, positions, 0, sensing=masks, headings=headings))
+    sensing = next(e for e in scene.entities if e.id == "sensing")
+    rays = [line for line in sensing.lines if len(line.points) == 2 * 6]
+    assert len(rays) == 3
+    for i, line in enumerate(rays):
+        drawn = np.array([(p.x, p.y) for p in line.points]).reshape(6, 2, 2)
+        np.testing.assert_allclose(drawn[:, 0], starts[i], atol=1e-12)
+        np.testing.assert_allclose(drawn[:, 1], ends[i], atol=1e-12)
+    for i in range(3):  # each pursuer's heading as an arrow in its colour
+        arrows = next(e for e in scene.entities if e.id == f"pursuer_{i}").arrows
+        q = arrows[-1].pose.orientation
+        np.testing.assert_allclose(2 * np.arctan2(q.z, q.w), angle[i], atol=1e-9)
+    plain = load_scenario("phys_diff_obstacles", {"sensing": {"radius": 2.0}})
+    scene = decoded(scene_update(plain, positions, 0, sensing=masks, headings=headings))
+    lines = next(e for e in scene.entities if e.id == "sensing").lines
+    assert all(len(line.points) != 12 for line in lines)
+    drawn = render_rgb(sc, positions, headings=headings)
+    bare = render_rgb(plain, positions, headings=headings)
+    assert drawn.shape == bare.shape and (drawn != bare).any(-1).sum() > 500

@@ -19,7 +19,7 @@ Importing this package imports neither torch nor gymnasium nor the simulators.
 from __future__ import annotations
 
 from .pretrained import pretrained_dir, pretrained_names
-from .runtime import Actor, Team, clip_to_disc
+from .runtime import Actor, Team, clip_to_box, clip_to_disc
 from .spec import FORMAT, POLICY_FILE, DeployError, read_policy
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "Actor",
     "DeployError",
     "Team",
+    "clip_to_box",
     "clip_to_disc",
     "load_team",
     "pretrained_dir",

@@ -2,10 +2,11 @@
 ONNX model) and :class:`Team` (every actor of an exported folder, as the env's agents).
 
 An actor's action is the one the env plays: an ``int`` move for discrete control (greedy:
-the argmax of the logits; sampled: a softmax sample by Gumbel-max), a float32 ``(vx, vy)``
-velocity command as a fraction of ``max_speed`` for continuous control (greedy: the
-Gaussian's mean; sampled: ``mean + exp(log_std) · ε``), scaled back onto the unit circle when
-it is longer than 1, as the env does with every command.
+the argmax of the logits; sampled: a softmax sample by Gumbel-max), a float32 command for
+continuous control (greedy: the Gaussian's mean; sampled: ``mean + exp(log_std) · ε``),
+limited as the env limits every command: a ``(vx, vy)`` velocity (a fraction of
+``max_speed``) scaled back onto the unit circle when longer than 1, or a differential-drive
+pursuer's ``(forward, turn)`` clipped to ``[-1, 1]`` each.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .spec import INPUT, LOG_STD, LOGITS, MEAN, DeployError, read_policy
+from .spec import INPUT, LOG_STD, LOGITS, MEAN, POLICY_FILE, DeployError, read_policy
 
 EXTRA = "pip install 'a2cm_phys[deploy]'"
 """What installs the runtime's one dependency beyond numpy."""
@@ -47,17 +48,31 @@ def clip_to_disc(commands: np.ndarray) -> np.ndarray:
     return (v / np.maximum(norm, 1.0)).astype(np.float32)
 
 
+def clip_to_box(commands: np.ndarray) -> np.ndarray:
+    """Differential-drive commands ``(..., 2)`` ``(forward, turn)`` clipped to ``[-1, 1]``
+    each (the env's rule for them), as float32."""
+    return np.clip(np.asarray(commands, dtype=np.float64), -1.0, 1.0).astype(np.float32)
+
+
+Clip = Callable[[np.ndarray], np.ndarray]
+"""How a continuous command is limited before the env plays it."""
+
+
 class Actor:
     """One agent's exported actor: its ONNX model, run by onnxruntime.
 
     Use :meth:`load`; ``continuous`` says which outputs it has (``logits``, or ``mean`` and
-    ``log_std``).
+    ``log_std``); ``clip`` limits its continuous commands (:func:`clip_to_disc` for velocity
+    commands, :func:`clip_to_box` for a differential-drive pursuer's).
     """
 
-    def __init__(self, session: Any, continuous: bool, name: str = "actor") -> None:
+    def __init__(
+        self, session: Any, continuous: bool, name: str = "actor", clip: Clip = clip_to_disc
+    ) -> None:
         self.session = session
         self.continuous = continuous
         self.name = name
+        self.clip = clip
         inputs = session.get_inputs()
         if len(inputs) != 1 or inputs[0].name != INPUT:
             raise DeployError(f"{name}: expected one input named {INPUT!r}")
@@ -68,12 +83,13 @@ class Actor:
             raise DeployError(f"{name}: outputs {outputs}, expected {want}")
 
     @classmethod
-    def load(cls, path: str | Path) -> Actor:
-        """The actor of one ``.onnx`` file (discrete or continuous, from its outputs)."""
+    def load(cls, path: str | Path, clip: Clip = clip_to_disc) -> Actor:
+        """The actor of one ``.onnx`` file (discrete or continuous, from its outputs), its
+        commands limited by ``clip``."""
         path = Path(path)
         session = _session(path)
         names = [o.name for o in session.get_outputs()]
-        return cls(session, continuous=MEAN in names, name=str(path))
+        return cls(session, continuous=MEAN in names, name=str(path), clip=clip)
 
     def outputs(self, obs: np.ndarray) -> dict[str, np.ndarray]:
         """The distribution's parameters for observations ``(B, obs_dim)`` (or one
@@ -97,7 +113,7 @@ class Actor:
         """Actions for observations ``(B, obs_dim)`` (``(B,)`` int64 moves or ``(B, 2)``
         float32 commands), or one action for one ``(obs_dim,)`` observation. Greedy by
         default; ``greedy=False`` samples with ``rng`` (a new unseeded generator if none)."""
-        return choose(self.outputs(obs), self.continuous, rng, greedy)
+        return choose(self.outputs(obs), self.continuous, rng, greedy, self.clip)
 
 
 def choose(
@@ -105,11 +121,13 @@ def choose(
     continuous: bool,
     rng: np.random.Generator | None = None,
     greedy: bool = True,
+    clip: Clip = clip_to_disc,
 ) -> np.ndarray:
     """The actions of actors' ``outputs`` (``logits (..., A)``, or ``mean`` and ``log_std
     (..., 2)``): greedy, or sampled with ``rng`` drawing one variate per output, in the
     outputs' order, as the package's own actors do (so the same ``rng`` gives the same
-    samples as the run's team when the outputs are stacked ``(B, N, ...)`` alike)."""
+    samples as the run's team when the outputs are stacked ``(B, N, ...)`` alike); continuous
+    commands limited by ``clip``."""
     if not greedy and rng is None:
         rng = np.random.default_rng()
     if not continuous:
@@ -121,7 +139,19 @@ def choose(
     if not greedy:
         noise = rng.standard_normal(mean.shape, dtype=np.float32)
         mean = (mean + np.exp(outputs[LOG_STD]) * noise).astype(np.float32)
-    return clip_to_disc(mean)
+    return clip(mean)
+
+
+def pursuer_clip(policy: Mapping[str, Any]) -> Clip:
+    """How ``policy.json`` says the pursuers' commands are limited: :func:`clip_to_box` with
+    differential drive (``actions.drive``), else :func:`clip_to_disc` (files exported before
+    differential drive existed hold no ``drive``: holonomic)."""
+    drive = policy["actions"].get("drive", "holonomic")
+    if drive not in ("holonomic", "differential"):
+        raise DeployError(
+            f"{POLICY_FILE}: actions.drive {drive!r}, expected holonomic or differential"
+        )
+    return clip_to_box if drive == "differential" else clip_to_disc
 
 
 class Team:
@@ -139,6 +169,8 @@ class Team:
         self.agents = list(self.actors)
         self.pursuers = [a for a in self.agents if a != "evader"]
         self.continuous = policy["actions"]["control"] == "continuous"
+        self.clip = pursuer_clip(policy)
+        """How the pursuers' continuous commands are limited (the evader's: its actor's)."""
         kind = policy["observation"]["encoding"]["kind"]
         self.encoding: str | None = None if kind == "xy" else kind
         """``None`` when the actors read the observation itself; ``"onehot"`` when they
@@ -157,7 +189,13 @@ class Team:
         """The team exported into ``folder`` (a :class:`DeployError` naming what is wrong)."""
         folder = Path(folder)
         policy = read_policy(folder)
-        actors = {a["agent"]: Actor.load(folder / a["file"]) for a in policy["actors"]}
+        clip = pursuer_clip(policy)
+        actors = {
+            a["agent"]: Actor.load(
+                folder / a["file"], clip_to_disc if a["agent"] == "evader" else clip
+            )
+            for a in policy["actors"]
+        }
         return cls(actors, policy)
 
     def act(
@@ -180,14 +218,14 @@ class Team:
             out = {}
             if pursuers:
                 heads = self._outputs(pursuers, [observations[a] for a in pursuers])
-                actions = choose(heads, self.continuous, rng, greedy)
+                actions = choose(heads, self.continuous, rng, greedy, self.clip)
                 out = dict(zip(pursuers, actions, strict=True))
             if "evader" in observations and "evader" in self.actors:
                 out["evader"] = self.actors["evader"].act(observations["evader"], rng, greedy)
             return {a: v if self.continuous else int(v) for a, v in out.items()}
         obs = np.asarray(observations, dtype=np.float32)
         heads = self._outputs(self.pursuers, [obs] * len(self.pursuers))
-        return choose(heads, self.continuous, rng, greedy)
+        return choose(heads, self.continuous, rng, greedy, self.clip)
 
     def _outputs(self, agents: list[str], obs: list[np.ndarray]) -> dict[str, np.ndarray]:
         """The ``agents``' outputs on their observations, stacked ``(..., agents, O)``."""

@@ -6,8 +6,9 @@ What touched in a step (:class:`Contacts`, from :func:`step_contacts`) is marked
 in text by its own symbol (:data:`TEXT_LEGEND`), in a frame by a ring around a caught
 evader and a star where two pursuers collided, with a legend under the arena. A frame
 draws the scenario's obstacles (physics: their shapes; grid: the cells they block) in the
-walls' colour, and differential-drive pursuers turned by their headings, a notch on their
-front edge.
+walls' colour, differential-drive pursuers turned by their headings, a notch on their
+front edge, and with a range sensor (``sensing.rays``) each pursuer's rays to where they
+stop.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 
 from ..config import Scenario
 from .grid import meet
+from .sensing import ray_segments
 
 PURSUER_COLOURS = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b")
 EVADER_COLOUR = "#444444"
@@ -168,7 +170,8 @@ def render_rgb(
     ring around a caught evader, a star between two pursuers that collided. On the grid,
     agents in one cell are drawn smaller, side by side, so that none hides another.
     ``headings`` ``(N, 2)`` ``(cos θ, sin θ)`` (differential drive) turn the pursuers' squares
-    and notch their front edges; without them squares are drawn unturned."""
+    and notch their front edges; without them squares are drawn unturned. A scenario with
+    ``sensing.rays`` draws each pursuer's rays, thin, in its colour."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -181,6 +184,11 @@ def render_rgb(
         path = np.concatenate((_centres(scenario, trail), _centres(scenario, positions)[None]))
         for xy, colour in zip(path.transpose(1, 0, 2), _colours(scenario), strict=True):
             ax.plot(xy[:, 0], xy[:, 1], color=colour, lw=1.4, alpha=0.6)
+    if scenario.sensing.rays:
+        starts, ends = ray_segments(scenario, positions, headings)
+        for i, colour in enumerate(_colours(scenario)[:-1]):
+            for (x0, y0), (x1, y1) in zip(starts[i], ends[i], strict=True):
+                ax.plot([x0, x1], [y0, y1], color=colour, lw=0.7, alpha=0.6, zorder=2.5)
     _draw_agents(ax, scenario, centres, scale, velocities, headings)
     _draw_contacts(ax, scenario, centres, contacts or Contacts())
     if title:

@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import Scenario
-from .rays import cast_rays, visible
+from .rays import cast_rays, ray_angles, visible
 
 
 def features(scenario: Scenario) -> int:
@@ -120,6 +120,34 @@ def range_readings(scenario: Scenario, body: np.ndarray, positions: np.ndarray) 
         scenario.obstacles,
     )
     return (reach / sensing.range).astype(np.float32)
+
+
+def ray_segments(
+    scenario: Scenario, positions: np.ndarray, headings: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where each pursuer's rays start and stop in one state, for drawing: ``(starts, ends)``
+    ``(N, rays, 2)`` metres, from the centres ``positions`` ``(N + 1, 2)`` (metres) and the
+    pursuers' ``headings`` ``(N, 2)`` ``(cos θ, sin θ)`` (differential drive; ``None``:
+    holonomic)."""
+    ph, sensing, n = scenario.physics, scenario.sensing, scenario.pursuers
+    xy = np.asarray(positions, dtype=np.float64)
+    angle = None
+    if headings is not None:
+        angle = np.arctan2(np.asarray(headings, dtype=np.float64)[:, 1], headings[:, 0])
+    reach = cast_rays(
+        xy[None],
+        None if angle is None else angle[None],
+        sensing.rays,
+        sensing.range,
+        scenario.size,
+        ph.box_side,
+        ph.evader_radius,
+        scenario.obstacles,
+    )[0, :n]
+    world = ray_angles(sensing.rays, angle, (n,))
+    starts = np.broadcast_to(xy[:n, None, :], (*world.shape, 2))
+    ends = starts + reach[..., None] * np.stack([np.cos(world), np.sin(world)], -1)
+    return starts, ends
 
 
 def team_observation(scenario: Scenario, state: np.ndarray, positions: np.ndarray) -> np.ndarray:

@@ -33,6 +33,12 @@ def observation_section(scenario: Scenario, encoding: str) -> dict[str, Any]:
             f"every agent's centre (x, y) in metres divided by size = {scenario.size}, then"
             f" every agent's velocity (vx, vy) in m/s divided by max_speed = {speed:g}"
         )
+        if scenario.differential:
+            headings = [f"{a}.{c}" for a in scenario.agents for c in ("cos", "sin")]
+            layout += headings
+            divided_by += [1.0] * len(headings)
+            units += ["1"] * len(headings)
+            scaling += ", then every pursuer's heading θ as (cos θ, sin θ)"
     if encoding == "onehot":
         encoded = {
             "kind": "onehot",
@@ -57,6 +63,20 @@ def observation_section(scenario: Scenario, encoding: str) -> dict[str, Any]:
 
 def actions_section(scenario: Scenario) -> dict[str, Any]:
     """What an actor's output means and how it becomes the action the env plays."""
+    if scenario.differential and scenario.continuous:
+        return {
+            "control": "continuous",
+            "drive": "differential",
+            "shape": [2],
+            "dtype": "float32",
+            "meaning": "(forward, turn): a pursuer's forward speed as a fraction of max_speed"
+            " and its turn rate as a fraction of max_turn_rate (counter-clockwise positive),"
+            " held for physics.dt seconds (one env step); the env clips each to [-1, 1]",
+            "max_speed": scenario.physics.max_speed,
+            "max_turn_rate": scenario.physics.max_turn_rate,
+            "dt": scenario.physics.dt,
+            "outputs": {MEAN: "the Gaussian's mean", LOG_STD: "its log standard deviation"},
+        }
     if scenario.continuous:
         return {
             "control": "continuous",
@@ -76,8 +96,16 @@ def actions_section(scenario: Scenario) -> dict[str, Any]:
         else f"max_speed = {scenario.physics.max_speed:g} m/s in that direction for"
         f" physics.dt = {scenario.physics.dt:g} s"
     )
+    if scenario.differential:
+        effect = (
+            "the pursuer turns towards that direction at up to max_turn_rate, and drives"
+            f" at max_speed = {scenario.physics.max_speed:g} m/s once it faces it, for"
+            f" physics.dt = {scenario.physics.dt:g} s"
+        )
+    drive = {"drive": "differential"} if scenario.differential else {}
     return {
         "control": "discrete",
+        **drive,
         "count": scenario.actions,
         "dtype": "int64",
         "meanings": moves,
@@ -88,6 +116,13 @@ def actions_section(scenario: Scenario) -> dict[str, Any]:
 
 def rules(scenario: Scenario) -> tuple[str, str]:
     """The greedy rule and the sampling rule, as sentences."""
+    if scenario.continuous and scenario.differential:
+        return (
+            "the mean, each of (forward, turn) clipped to [-1, 1] (the command the env plays"
+            " for the mean)",
+            "mean + exp(log_std) * e, e standard normal per dimension, then each clipped to"
+            " [-1, 1]",
+        )
     if scenario.continuous:
         return (
             "the mean, scaled back onto the unit circle when longer than 1: mean / max(1,"

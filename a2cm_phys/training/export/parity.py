@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from ...config import Scenario
-from ...deploy import Team, clip_to_disc
+from ...deploy import Team
 from ...deploy.spec import LOG_STD, LOGITS, MEAN
 
 if TYPE_CHECKING:
@@ -97,7 +97,7 @@ def _compare(model: ActorCritic, team: Team, agents: list[str], obs: np.ndarray)
         mine = team.actors[agent].act(obs, greedy=True)
         theirs = model.dist.greedy(rollout[:, i])
         if team.continuous:
-            close = np.abs(mine - clip_to_disc(theirs)) <= TOLERANCE
+            close = np.abs(mine - team.actors[agent].clip(theirs)) <= TOLERANCE
             same += int(close.all(-1).sum())
         else:
             same += int((mine == theirs).sum())
