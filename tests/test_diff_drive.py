@@ -18,9 +18,9 @@ from a2cm_phys.envs import chipmunk
 from a2cm_phys.envs.drive import ALIGNED, lateral_speed
 from a2cm_phys.envs.parallel import observation_space, state_space
 from a2cm_phys.envs.physics import PhysicsCore
+from a2cm_phys.envs.rails import ACROSS
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.envs.workers import ProcessCore
-from a2cm_phys.envs.world import ACROSS
 
 UP, DOWN, LEFT, RIGHT, STAY = range(5)
 LATERAL = 1e-9  # m/s: what the projection leaves across a heading is rounding, ~1e-16
@@ -349,7 +349,7 @@ def test_resets_start_every_pursuer_at_heading_zero_at_rest():
     core.reset(np.array([1]), np.array([5], dtype=np.uint64))
     np.testing.assert_array_equal(core.headings()[1], np.tile([1.0, 0.0], (3, 1)))
     world = core._worlds[1]
-    for body, rail, pin in zip(world.bodies[:3], world.rails, world.pins, strict=True):
+    for body, rail, pin in zip(world.bodies[:3], world.rails.bodies, world.rails.pins, strict=True):
         assert body.angle == 0.0 and body.angular_velocity == 0.0 and body.torque == 0.0
         assert body.velocity == (0.0, 0.0) and rail.position == body.position
         assert isinstance(pin, pymunk.PinJoint) and pin.max_bias == 0.0 and pin.b is body

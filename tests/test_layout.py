@@ -197,8 +197,6 @@ LIMITS = {"file": 400, "class": 150, "function": 80}
 
 KEPT_LARGE: dict[str, str] = {
     # issue 46 grew the physics worlds by differential drive and obstacles; to be split
-    "a2cm_phys/envs/world.py:World": "differential drive's rails and torques (issue 46)",
-    "a2cm_phys/envs/world.py:__init__": "World's bodies, rails and obstacles (issue 46)",
     "a2cm_phys/envs/worlds.py:Worlds": "the substep-major loop of differential drive",
     "a2cm_phys/envs/workers.py:ProcessCore": "headings through shared memory (issue 46)",
 }

@@ -90,6 +90,33 @@ def test_physics_starts_overlap_nothing_and_clear_the_walls(name: str) -> None:
     np.testing.assert_allclose(core.positions(), xy[:64], rtol=0, atol=1e-12)
 
 
+def test_pursuers_keep_the_distance_asked_and_the_default_is_todays() -> None:
+    base = load_scenario("phys_diff_obstacles", {"start.min_pursuer_distance": 0.0})
+    seeds = np.arange(3_000, dtype=np.uint64)
+    plain = random_starts(base, seeds)
+    np.testing.assert_array_equal(plain, random_starts(load_scenario("phys_cont_random", {
+        "obstacles": [dataclasses.asdict(o) for o in base.obstacles], "physics.drive":
+        "differential"}), seeds))  # fmt: skip
+    n = base.pursuers
+    pairs = list(itertools.combinations(range(n), 2))
+    close = min(np.linalg.norm(plain[:, i] - plain[:, j], axis=-1).min() for i, j in pairs)
+    assert close < 0.85  # without the key, pursuers start too close to turn in place
+    sc = load_scenario("phys_diff_obstacles", {"start.min_pursuer_distance": 1.2})
+    xy = random_starts(sc, seeds)
+    for i, j in pairs:
+        assert np.linalg.norm(xy[:, i] - xy[:, j], axis=-1).min() >= 1.2
+    kept = np.all([np.linalg.norm(plain[:, i] - plain[:, j], axis=-1) >= 1.2 for i, j in pairs], 0)
+    assert 0.2 < kept.mean() < 0.9  # the rule bites, and starts that kept it are unchanged
+    np.testing.assert_array_equal(xy[kept], plain[kept])
+    dist = np.linalg.norm(xy[:, :n] - xy[:, n:], axis=-1)
+    assert dist.min() >= sc.start.min_evader_distance
+    with pytest.raises(ConfigError, match=r"or start\.min_pursuer_distance \(4\)"):
+        random_starts(load_scenario("phys_diff_obstacles", {"start.min_pursuer_distance": 4.0}),
+                      seeds[:4])  # fmt: skip
+    with pytest.raises(ConfigError, match=r"start\.min_pursuer_distance"):
+        load_scenario("phys_diff_obstacles", {"start.min_pursuer_distance": -0.5})
+
+
 def test_a_start_is_a_function_of_its_seed_alone() -> None:
     for name in ("grid_random", "phys_cont_random"):
         sc = load_scenario(name)
@@ -226,6 +253,7 @@ def test_the_symmetric_solver_averages_the_same_starts(case: dict) -> None:
         ({"start": "anywhere"}, r"start\.kind"),
         ({"start.kind": "random", "start.min_evader_distance": -1}, r"start\.min_evader_distance"),
         ({"start.kind": "random", "start.near": 1}, r"start\.near"),
+        ({"start.min_pursuer_distance": 1.0}, r"start\.min_pursuer_distance.*mode = 'physics'"),
     ],
 )
 def test_bad_start_keys_name_the_key(overrides: dict, match: str) -> None:

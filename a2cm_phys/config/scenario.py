@@ -171,19 +171,22 @@ class Start:
     no two agents on one cell (grid) or touching (physics), every body clear of the walls,
     and every pursuer at least ``min_evader_distance`` from the evader (grid: Manhattan
     distance in cells, so the default 2 keeps pursuers off and not next to the evader;
-    physics: metres between centres). ``start = "random"`` is short for
-    ``[start] kind = "random"``."""
+    physics: metres between centres). In physics ``min_pursuer_distance`` also keeps the
+    pursuers' centres that far apart (0: their boxes apart, no more; a differential-drive
+    pursuer turning in place sweeps a circle of its box's diagonal, ``box_side · √2``).
+    ``start = "random"`` is short for ``[start] kind = "random"``."""
 
     shorthand: typing.ClassVar[str] = "kind"  # a bare string value sets this key
     kind: StartKind = "fixed"
     min_evader_distance: float = 2.0
+    min_pursuer_distance: float = field(default=0.0, metadata=OMIT_DEFAULT)  # m, physics
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the key of an impossible value."""
-        if not self.min_evader_distance >= 0:
-            raise InvalidKey(
-                "start.min_evader_distance", f"must be >= 0, got {self.min_evader_distance!r}"
-            )
+        for key in ("min_evader_distance", "min_pursuer_distance"):
+            value = getattr(self, key)
+            if not value >= 0:
+                raise InvalidKey(f"start.{key}", f"must be >= 0, got {value!r}")
 
     @property
     def random(self) -> bool:
@@ -251,6 +254,7 @@ class Scenario:
                 ("sensing.rays", self.sensing.rays, 0),
                 ("sensing.range", self.sensing.range, 3.0),
                 ("sensing.occlusion", self.sensing.occlusion, False),
+                ("start.min_pursuer_distance", self.start.min_pursuer_distance, 0.0),
             ):
                 if value != default:
                     raise InvalidKey(key, f"{value!r} needs mode = 'physics'")

@@ -5,7 +5,7 @@ sliding sideways.
 A differential-drive pursuer (:mod:`.world`) has a velocity servo, whose target is
 ``forward × (cos θ, sin θ)``, and a turning motor: the torque ``I (ω − w) / h`` that brings
 its angular velocity ``w`` to the commanded turn rate ``ω`` in one substep ``h`` (``I`` its
-moment of inertia), clipped to :func:`~.world.turn_torque`. Both are set before *every*
+moment of inertia), clipped to :func:`~.rails.turn_torque`. Both are set before *every*
 substep (not once per control period), from the pursuer's heading and spin then. (A torque
 rather than a gear-joint servo: the same limit and, unresisted, the same rate from the
 next substep on, but no joint for each of the solver's iterations to solve; and not the
@@ -50,7 +50,7 @@ import numpy as np
 import pymunk
 
 from ..config import Scenario
-from .world import turn_torque
+from .rails import turn_torque
 
 ALIGNED = 0.05
 """Heading error (rad, about 3°) within which a discrete move drives forward."""

@@ -46,12 +46,15 @@ def _grid_valid(xy: np.ndarray, min_distance: float) -> np.ndarray:
 
 def _physics_valid(scenario: Scenario, xy: np.ndarray) -> np.ndarray:
     """``(K,)`` whether positions ``(K, N + 1, 2)`` (metres) are a valid start: pursuers'
-    (axis-aligned) boxes apart, each pursuer at least ``min_evader_distance`` and clear of
-    the evader's circle (its box's circumcircle outside it), every body clear of the
-    obstacles."""
+    (axis-aligned) boxes apart and their centres ``min_pursuer_distance`` apart, each
+    pursuer at least ``min_evader_distance`` and clear of the evader's circle (its box's
+    circumcircle outside it), every body clear of the obstacles."""
     ph, n = scenario.physics, scenario.pursuers
     gap = np.abs(xy[:, :n, None] - xy[:, None, :n])  # (K, N, N, 2)
     apart = np.any(gap >= ph.box_side, axis=-1) | np.eye(n, dtype=bool)
+    spread = scenario.start.min_pursuer_distance
+    if spread > 0:
+        apart &= (np.hypot(gap[..., 0], gap[..., 1]) >= spread) | np.eye(n, dtype=bool)
     dist = np.linalg.norm(xy[:, :n] - xy[:, n:], axis=-1)
     clear = max(scenario.start.min_evader_distance, ph.evader_radius + ph.box_side / np.sqrt(2))
     valid = np.all(apart, axis=(1, 2)) & np.all(dist >= clear, axis=1)
@@ -88,7 +91,8 @@ def _candidates(
 def random_starts(scenario: Scenario, seeds: np.ndarray) -> np.ndarray:
     """Each episode seed's random start ``(B, N + 1, 2)``: cells (int64, grid) or metres
     (float64, physics), pursuers first. Raises :class:`~a2cm_phys.config.ConfigError`
-    (naming ``start.min_evader_distance``) if a valid start is too rare to be drawn (physics
+    (naming ``start.min_evader_distance``, and ``start.min_pursuer_distance`` when set) if
+    a valid start is too rare to be drawn (physics
     only: :meth:`~a2cm_phys.config.Scenario.validate` refuses every grid game without one)."""
     seeds = np.atleast_1d(np.asarray(seeds, dtype=np.uint64))
     grid = scenario.mode == "grid"
@@ -105,10 +109,15 @@ def random_starts(scenario: Scenario, seeds: np.ndarray) -> np.ndarray:
         todo = todo[~ok]
         if not len(todo):
             return out
+    start = scenario.start
+    key = "start.min_evader_distance"
+    lower = f"lower {key} ({start.min_evader_distance:g})"
+    if start.min_pursuer_distance > 0:  # either may be what leaves no room
+        key = "start.min_evader_distance, start.min_pursuer_distance"
+        lower += f" or start.min_pursuer_distance ({start.min_pursuer_distance:g})"
     raise ConfigError(
-        f"scenario '{scenario.name}': key 'start.min_evader_distance': no valid random start "
-        f"found in {_ATTEMPTS:,} draws; lower start.min_evader_distance "
-        f"({scenario.start.min_evader_distance:g})"
+        f"scenario '{scenario.name}': key '{key}': no valid random start found in"
+        f" {_ATTEMPTS:,} draws; {lower}"
     )
 
 

@@ -8,14 +8,9 @@ dynamic square boxes, the evader a dynamic disc, all with rotation locked but fo
 differential-drive pursuers (``physics.drive = "differential"``), whose rotation is free.
 Such a pursuer is turned by a torque-limited motor: before every substep it is given the
 torque that brings its angular velocity to the commanded turn rate within the substep, at
-most :func:`turn_torque` (:mod:`.drive`); chipmunk applies it before solving the contacts,
-which may then stop the turn, so a box is never turned into a wall. It also has a *rail*:
-a kinematic body outside the space like the control bodies, placed on the pursuer and
-turned to its heading before every substep, and a :class:`pymunk.PinJoint` (``max_bias =
-0``, unlimited force) from a point :data:`ACROSS` metres to the rail's left to the
-pursuer's centre. The rail does not move, and the pin holds the rate of change of that
-distance at zero: it forbids the pursuer's velocity across its heading, inside the
-solver, together with the contacts (a one-axis joint, cheaper than a groove). Each agent is
+most :func:`~.rails.turn_torque` (:mod:`.drive`); chipmunk applies it before solving the contacts,
+which may then stop the turn, so a box is never turned into a wall. It also has a *rail*
+(:mod:`.rails`) that forbids its velocity across its heading inside the solver. Each agent is
 driven by a *velocity servo* (pymunk's tank-example idiom): a kinematic control body given
 the commanded velocity, pinned to the agent by a :class:`pymunk.PivotJoint` with
 ``max_bias = 0`` (no position correction: it only matches velocities) and ``max_force =
@@ -36,7 +31,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from enum import IntEnum
 from itertools import combinations
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import pymunk
@@ -46,7 +41,6 @@ from .chipmunk import (
     accessor,
     body_addresses,
     contact_callbacks,
-    drive_addresses,
     handle_contacts,
     stepper,
     unhook,
@@ -61,6 +55,7 @@ from .contacts import (
 )
 from .core import agent_names
 from .obstacles import obstacle_shape
+from .rails import Rails
 
 
 class CollisionType(IntEnum):
@@ -96,35 +91,25 @@ def pair_table(scenario: Scenario) -> list[list[Pair]]:
     return table
 
 
-ACROSS = 1e3
-"""How far (m) across its heading a pursuer's pin is anchored on its rail: so far that the
-pursuer's motion within a substep (a few centimetres) turns the pin's line by some 1e-5
-rad at most, while the anchor's rounding stays near 1e-13 m."""
-
-
-class Turning(NamedTuple):
-    """A differential-drive pursuer's per-body calls (:func:`~.chipmunk.accessor`): what
-    :class:`~.worlds.Worlds` reads and writes each substep where memory cannot be reached,
-    and what :meth:`World.rebuild` resets."""
-
-    velocity: Callable[[], Any]
-    rotation: Callable[[], Any]
-    position: Callable[[], Any]
-    angle: Callable[[], float]
-    spin: Callable[[], float]
-    set_velocity: Callable[[Any], None]
-    steer: Callable[[Any], None]
-    set_torque: Callable[[float], None]
-    turn_rail: Callable[[float], None]
-    place_rail: Callable[[Any], None]
-    set_angle: Callable[[float], None]
-    set_spin: Callable[[float], None]
-
-
-def turn_torque(scenario: Scenario) -> float:
-    """The turning motor's torque limit (N·m) of a differential-drive pursuer: the force
-    limit ``max_force`` at the box's edge, half a side from its centre."""
-    return scenario.physics.max_force * scenario.physics.box_side / 2
+def static_shapes(scenario: Scenario, static: pymunk.Body) -> list[pymunk.Shape]:
+    """The arena's static shapes on ``static``: the four walls, boxes ``wall_thickness``
+    thick outside ``[0, size]²``, then the scenario's obstacles."""
+    size, t = float(scenario.size), scenario.physics.wall_thickness
+    shapes: list[pymunk.Shape] = []
+    for x0, y0, x1, y1 in (
+        (-t, -t, 0.0, size + t),  # left
+        (size, -t, size + t, size + t),  # right
+        (0.0, -t, size, 0.0),  # bottom
+        (0.0, size, size, size + t),  # top
+    ):
+        wall = pymunk.Poly(static, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+        wall.collision_type = CollisionType.WALL
+        shapes.append(wall)
+    for obstacle in scenario.obstacles:  # static like the walls, added with them
+        block = obstacle_shape(obstacle, static)
+        block.collision_type = CollisionType.OBSTACLE
+        shapes.append(block)
+    return shapes
 
 
 class World:
@@ -147,7 +132,9 @@ class World:
     Shapes keep pymunk's default friction and elasticity, both 0: agents slide along walls
     and each other without bouncing, and the servo plays the part of floor friction.
 
-    Over the layout test's size limit since issue 46 (``KEPT_LARGE``): to be split."""
+    With differential drive ``rails`` holds the pursuers' rails (:class:`~.rails.Rails`),
+    ``turning`` their calls and ``drive_addresses`` their memory addresses (else ``None``,
+    ``[]`` and ``None``)."""
 
     __slots__ = (
         "_callbacks",
@@ -162,7 +149,6 @@ class World:
         "controls",
         "cp_space",
         "drive_addresses",
-        "pins",
         "probes",
         "rails",
         "servos",
@@ -174,26 +160,13 @@ class World:
     )
 
     def __init__(self, scenario: Scenario, xy: np.ndarray, table: list[list[Pair]]) -> None:
-        ph, size, n = scenario.physics, float(scenario.size), scenario.pursuers
+        ph, n = scenario.physics, scenario.pursuers
         self._static = pymunk.Body(body_type=pymunk.Body.STATIC)
-        tags: dict[pymunk.Shape, int] = {}  # shape -> row of the pair table
-        self._walls: list[pymunk.Shape] = []
-        t = ph.wall_thickness
-        for x0, y0, x1, y1 in (
-            (-t, -t, 0.0, size + t),  # left
-            (size, -t, size + t, size + t),  # right
-            (0.0, -t, size, 0.0),  # bottom
-            (0.0, size, size, size + t),  # top
-        ):
-            wall = pymunk.Poly(self._static, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
-            wall.collision_type = CollisionType.WALL
-            tags[wall] = n + 1
-            self._walls.append(wall)
-        for obstacle in scenario.obstacles:  # static like the walls, added with them
-            block = obstacle_shape(obstacle, self._static)
-            block.collision_type = CollisionType.OBSTACLE
-            tags[block] = n + 2
-            self._walls.append(block)
+        self._walls = static_shapes(scenario, self._static)
+        tags = {  # shape -> row of the pair table
+            shape: n + 1 if shape.collision_type == CollisionType.WALL else n + 2
+            for shape in self._walls
+        }
         differential = ph.drive == "differential"
         turning_moment = pymunk.moment_for_box(ph.mass, (ph.box_side, ph.box_side))
         self.bodies: list[pymunk.Body] = []
@@ -225,51 +198,27 @@ class World:
         ]
         self.addresses = body_addresses(self.bodies, self.controls)
         self._max_force = ph.max_force
-        self.drive_addresses = None
-        self.rails: list[pymunk.Body] = []
-        self.turning: list[Turning] = []  # differential drive: each pursuer's calls
-        if differential:
-            self.rails = [pymunk.Body(body_type=pymunk.Body.KINEMATIC) for _ in range(n)]
-            pursuers = self.bodies[:n], self.controls[:n], self.rails
-            self.drive_addresses = drive_addresses(self.bodies[:n], self.rails)
-            for body, control, rail in zip(*pursuers, strict=True):
-                self.turning.append(
-                    Turning(
-                        accessor(body, "velocity", write=False),
-                        accessor(body, "rotation_vector", write=False),
-                        accessor(body, "position", write=False),
-                        accessor(body, "angle", write=False),
-                        accessor(body, "angular_velocity", write=False),
-                        accessor(body, "velocity", write=True),
-                        accessor(control, "velocity", write=True),
-                        accessor(body, "torque", write=True),
-                        accessor(rail, "angle", write=True),
-                        accessor(rail, "position", write=True),
-                        accessor(body, "angle", write=True),
-                        accessor(body, "angular_velocity", write=True),
-                    )
-                )
+        self.rails = Rails(self.bodies[:n], self.controls[:n]) if differential else None
+        self.turning = [] if self.rails is None else self.rails.turning
+        self.drive_addresses = None if self.rails is None else self.rails.addresses
         self.tracker = ContactTracker()
         self._callbacks = contact_callbacks(self.tracker, table, tags)
         self._hooked: Any = None  # the space's handler, when it calls C callbacks
         self.space: pymunk.Space | None = None
         self.servos: list[pymunk.PivotJoint] = []
-        self.pins: list[pymunk.PinJoint] = []
         self.rebuild(xy)
 
     def rebuild(self, xy: np.ndarray) -> None:
         """A new space with every agent at rest at ``xy`` (``(N + 1, 2)`` metres)."""
         old = self.space
         unhook(self._hooked)  # the removals below need not reach the tracker: it is cleared
+        rails = self.rails
         if old is not None:  # release the objects (pymunk's separate callbacks still fire)
-            joints = (*self.servos, *self.pins)
+            joints = (*self.servos, *(() if rails is None else rails.pins))
             old.remove(*self._walls, *self._shapes, *joints, *self.bodies)
             old.remove(self._static)
-        for io in self.turning:  # before the shapes enter the space, which caches their pose
-            io.set_angle(0.0)  # heading 0 (+x, the transform follows), not spinning
-            io.set_spin(0.0)
-            io.set_torque(0.0)
-            io.turn_rail(0.0)
+        if rails is not None:
+            rails.rest()
         space = pymunk.Space()
         space.collision_slop = COLLISION_SLOP
         space.add(self._static, *self._walls)
@@ -295,15 +244,8 @@ class World:
             servo.max_force = self._max_force
             space.add(body, shape, servo)
             self.servos.append(servo)
-        self.pins = []
-        k = len(self.rails)  # the differential-drive pursuers (none: holonomic)
-        for body, rail, io in zip(self.bodies[:k], self.rails, self.turning, strict=True):
-            io.place_rail(tuple(body.position))  # where every step's first substep puts it
-            # Blind to the pin's length (max_bias = 0): it only stops sideways motion.
-            pin = pymunk.PinJoint(rail, body, (0.0, ACROSS), (0.0, 0.0))
-            pin.max_bias = 0.0
-            space.add(pin)
-            self.pins.append(pin)
+        if rails is not None:
+            rails.attach(space, self.bodies[: len(rails.bodies)])
         self.tracker.clear()
         # One wildcard handler: the pairs that can touch are exactly the ones we record
         # (pursuer-pursuer, pursuer-evader, agent-wall; static walls never touch each
