@@ -92,7 +92,7 @@ class Worlds:
             # the torque, the rail's rotation and centre; flat, as the values are contiguous
             write = np.concatenate((index[:, 1, :n], index[:, 2, :n], drive[..., 8:]), axis=-1)
             write = np.ascontiguousarray(write.transpose(2, 0, 1))
-            self._drive_write = {11: write.ravel(), 9: write[2:].ravel()}
+            self._drive_write = {11: write.ravel(), 9: write[2:].ravel(), 2: write[:2].ravel()}
 
     def restart(self, envs: Sequence[int], starts: Sequence[np.ndarray | None]) -> None:
         """Put every agent of games ``envs`` at rest in a new space (:meth:`World.rebuild`),
@@ -201,7 +201,8 @@ class Worlds:
         dt = self._dt
         space_step = self._cp_step
         spaces = [world.cp_space for world in self.worlds] if mapped else None
-        for _ in self._substeps:
+        last = len(self._substeps) - 1
+        for k in self._substeps:
             if spaces is not None:
                 for space in spaces:
                     space_step(space, dt)
@@ -209,7 +210,10 @@ class Worlds:
                 for world in self.worlds:
                     world.step(dt)
             before, now = now, read()
-            write(self._next(plan, before, now), now)
+            if k < last:
+                write(self._next(plan, before, now), now)
+            else:  # the next step sets the servos and rails anew: the velocities alone
+                write(realign(now[:2], before[2:4], now[2:4]), now)
         worlds = zip(self.worlds, steps, strict=True)
         events = [world.tracker.end_step(step) for world, step in worlds]
         headings[:] = now[2:4].transpose(1, 2, 0)
@@ -245,7 +249,8 @@ class Worlds:
         return self._memory[self._drive_read]
 
     def _scatter(self, values: np.ndarray, now: np.ndarray) -> None:
-        """Write :meth:`_next`'s values (the per-body path also reads ``now``)."""
+        """Write :meth:`_next`'s values, or the realigned velocities alone ``(2, B, N)``
+        (the per-body path also reads ``now``)."""
         self._memory[self._drive_write[len(values)]] = values.reshape(-1)
 
     def _read_each(self) -> np.ndarray:
@@ -267,6 +272,8 @@ class Worlds:
             for io, row, angle in zip(world.turning, game, turns, strict=True):
                 if at:
                     io.set_velocity((row[0], row[1]))
+                if at < 0:  # the velocities alone
+                    continue
                 io.steer((row[at], row[at + 1]))
                 io.set_torque(row[at + 2])
                 io.turn_rail(angle)
