@@ -57,7 +57,7 @@ def test_pursuit_is_a_table_of_the_rule_evaluate_plays(tmp_path, capsys) -> None
     assert np.all(table.max(-1) == 1.0)
     argv = ["--scenario", "grid_vs", *SMALL, "--best-response", "evader", "--pursuers", "pursuit"]
     assert oracle.main(argv) == 0
-    assert "pursuers: pursuit (each pursuer straight at the evader)" in capsys.readouterr().out
+    assert "pursuers: pursuit (each pursuer straight at the evader" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(

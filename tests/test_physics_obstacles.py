@@ -12,7 +12,7 @@ import pytest
 from test_record import check_messages, make_log
 
 from a2cm_phys import make_env
-from a2cm_phys.analysis.baselines import detour_actions, detour_targets, pursuit_actions, steer
+from a2cm_phys.analysis.baselines import detour_targets, pursuit_actions, steer
 from a2cm_phys.commands.replay import main as replay
 from a2cm_phys.config import InvalidKey, load_scenario
 from a2cm_phys.envs.contacts import (
@@ -283,7 +283,7 @@ def test_logs_carry_headings_and_replay_verifies_them(tmp_path):
     assert plain_log.n_episodes and plain_log.trajectory(0).headings is None  # as before
 
 
-def test_detour_heads_for_the_next_cell_of_a_shortest_path_around_obstacles():
+def test_pursuit_heads_for_the_next_cell_of_a_shortest_path_around_obstacles():
     sc = load_scenario("grid_obstacles", {"evader": "static"})
     # pursuer 0 left of the left block, pursuer 1 on the evader's row behind the right
     # block, pursuer 2 beside the evader; the evader in the centre (2, 2)
@@ -292,25 +292,27 @@ def test_detour_heads_for_the_next_cell_of_a_shortest_path_around_obstacles():
     np.testing.assert_array_equal(targets[0, 0], (0, 3))  # around the block: up first
     np.testing.assert_array_equal(targets[0, 1], (4, 3))
     np.testing.assert_array_equal(targets[0, 2], (2, 2))  # next to it: straight at it
-    moves = detour_actions(sc, cells)
-    assert moves.tolist() == [[0, 0, 1]]  # up, up, down
-    assert pursuit_actions(sc, cells).tolist() == [[3, 2, 1]]  # into the blocks
+    assert pursuit_actions(sc, cells).tolist() == [[0, 0, 1]]  # up, up, down
+    bare = replace(sc, obstacles=())
+    assert pursuit_actions(bare, cells).tolist() == [[3, 2, 1]]  # straight: into the blocks
+    np.testing.assert_array_equal(pursuit_actions(sc, cells[None])[0], [[0, 0, 1]])
     phys = load_scenario("phys_diff_obstacles")
     metres = cells + 0.5
     np.testing.assert_array_equal(detour_targets(phys, metres)[0, :2], [(0.5, 3.5), (4.5, 3.5)])
 
 
-def test_detour_gets_round_the_walls_where_pursuit_sticks():
+def test_pursuit_gets_round_the_walls_where_heading_straight_sticks():
     """Against a static evader in the rooms of ``phys_diff10_obstacles``, heading straight
     for it leaves pursuers pressed against walls; the detour catches it far more often."""
     sc = load_scenario("phys_diff10_obstacles", {"evader": "static"})
+    bare = replace(sc, obstacles=())  # the straight-line pursuit, in the same rooms
     captures = []
-    for policy in (pursuit_actions, detour_actions):
+    for rule in (bare, sc):
         env = VectorEnv(sc, 8)
         env.reset(0)
         caught = 0
         for _ in range(500):
-            step = env.step(policy(sc, env.core.positions(), env.core.headings()))
+            step = env.step(pursuit_actions(rule, env.core.positions(), env.core.headings()))
             caught += int(step.outcome.captured.sum())
         captures.append(caught)
     assert captures[1] >= 2 * max(captures[0], 1)

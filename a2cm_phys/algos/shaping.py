@@ -10,6 +10,8 @@ one cell in grid mode, ``max_speed · dt`` in physics mode):
 - **distance** (``Train.distance_shaping``): ``−coef · mean_i |p_i − e| / step``, the
   pursuers' mean distance to the evader, so ``coef = 1`` pays about +1 per step to a team
   closing in at full speed, the size of the step cost (VMAS's ``pos_shaping_factor``);
+  with obstacles the distance around them (:func:`~a2cm_phys.envs.paths.around_obstacles`),
+  so that no pursuer is paid for pressing against a wall between it and the evader;
 - **cell area** (``Train.area_shaping``): ``−coef · A / (side · step)``, ``A`` the area of
   the evader's Voronoi cell in the arena (:mod:`.voronoi`: the region it reaches before any
   pursuer) and ``side`` the arena's side, so a pursuer that advances one step along a
@@ -45,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Scenario
+from ..envs.paths import around_obstacles
 from .voronoi import cell_area
 
 
@@ -62,6 +65,7 @@ class ProgressShaping:
         self, scenario: Scenario, distance: float = 1.0, area: float = 0.0, sign: float = 1.0
     ) -> None:
         self.n = scenario.pursuers
+        self.scenario = scenario
         if scenario.mode == "grid":  # obs = cell / (size - 1); one cell per step
             self.metres, step = scenario.size - 1, 1.0
             self.low, self.high = -0.5, scenario.size - 0.5  # the cells' outer edges
@@ -75,7 +79,10 @@ class ProgressShaping:
         """``Φ`` of observations ``(..., obs_dim)``, float64 of shape ``(...)``."""
         xy = np.asarray(obs, dtype=np.float64)[..., : 2 * (self.n + 1)]
         xy = xy.reshape(*xy.shape[:-1], self.n + 1, 2)
-        dist = np.linalg.norm(xy[..., : self.n, :] - xy[..., self.n : self.n + 1, :], axis=-1)
+        if self.scenario.obstacles:
+            dist = around_obstacles(self.scenario, xy * self.metres) / self.metres
+        else:
+            dist = np.linalg.norm(xy[..., : self.n, :] - xy[..., self.n : self.n + 1, :], axis=-1)
         phi = -self.scale * dist.mean(-1)
         if self.area_scale:
             where = xy * self.metres

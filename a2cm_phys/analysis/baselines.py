@@ -4,22 +4,19 @@
 with no thought for the others: the baseline that cooperation must beat. A
 differential-drive pursuer (continuous control) turns towards the evader and drives once
 facing it (:func:`steer`); with discrete moves the move primitives turn it themselves.
-
-:func:`detour_actions` is ``pursuit`` around obstacles: each pursuer heads for the next cell
-on a shortest path over the free cells to the evader's cell (breadth-first over the grid
-of cells, 4-connected), and straight for the evader once in its cell or next to it.
+Around obstacles it heads instead for the next cell on a shortest path over the free
+cells to the evader's cell (:func:`detour_targets`: breadth-first over the grid of cells,
+4-connected), and straight for the evader once in its cell or next to it.
 """
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
 
 from ..config import Scenario
+from ..envs.paths import cells_of, neighbours, path_lengths
 
 UP, DOWN, LEFT, RIGHT, STAY = range(5)
-_STEPS = ((0, 1), (0, -1), (-1, 0), (1, 0))  # up, down, left, right, in cells
 
 
 def pursuit_actions(
@@ -35,9 +32,14 @@ def pursuit_actions(
     that steers towards it (:func:`steer`). With discrete moves ``(..., N)`` int64: the
     axis move that most reduces the distance, i.e. along the axis of the larger gap (x on
     a tie), or ``stay`` when on the evader's position if the scenario has it (else ``up``).
+    With obstacles each pursuer heads for :func:`detour_targets` instead of the evader.
     """
     positions = np.asarray(positions, dtype=np.float64)
-    return _towards(scenario, positions[..., -1:, :] - positions[..., :-1, :], headings)
+    if not scenario.obstacles:
+        return _towards(scenario, positions[..., -1:, :] - positions[..., :-1, :], headings)
+    games = positions.reshape(-1, *positions.shape[-2:])
+    targets = detour_targets(scenario, games).reshape(*positions.shape[:-2], -1, 2)
+    return _towards(scenario, targets - positions[..., :-1, :], headings)
 
 
 def _towards(scenario: Scenario, gap: np.ndarray, headings: np.ndarray | None) -> np.ndarray:
@@ -76,56 +78,22 @@ def steer(scenario: Scenario, direction: np.ndarray, headings: np.ndarray) -> np
     return np.stack((forward, turn), axis=-1).astype(np.float32)
 
 
-def detour_actions(
-    scenario: Scenario, positions: np.ndarray, headings: np.ndarray | None = None
-) -> np.ndarray:
-    """:func:`pursuit_actions` around the scenario's obstacles, from positions ``(B, N + 1,
-    2)`` (and headings, as there): each pursuer heads for :func:`detour_targets`."""
-    positions = np.asarray(positions, dtype=np.float64)
-    gap = detour_targets(scenario, positions) - positions[:, :-1]
-    return _towards(scenario, gap, headings)
-
-
 def detour_targets(scenario: Scenario, positions: np.ndarray) -> np.ndarray:
     """Where each pursuer heads ``(B, N, 2)`` (cells or metres, as ``positions`` ``(B, N +
     1, 2)``): the next cell (its centre, in physics) on a shortest path over the free cells
-    (:meth:`~a2cm_phys.config.Scenario.blocked_cells`) to the evader's cell, the first of
-    up, down, left, right on a tie; the evader itself once in its cell or next to it, or
-    where no path leads there."""
+    (:func:`~a2cm_phys.envs.paths.path_lengths`) to the evader's cell, the first of up,
+    down, left, right on a tie; the evader itself once in its cell or next to it, or where
+    no path leads there."""
     positions = np.asarray(positions, dtype=np.float64)
-    top = scenario.size - 1
-    cells = np.clip(np.floor(positions), 0, top).astype(np.int64)
+    far = path_lengths(scenario)
+    cells = cells_of(scenario, positions)
+    pursuers, evader = cells[:, :-1], cells[:, -1:]
+    nb = neighbours(scenario.size)[pursuers]  # (B, N, 4)
+    via = np.where(nb >= 0, far[evader[..., None], np.maximum(nb, 0)], -1)
+    best = np.take_along_axis(
+        nb, np.where(via >= 0, via, np.iinfo(np.int64).max).argmin(-1)[..., None], -1
+    )[..., 0]
     centre = 0.0 if scenario.mode == "grid" else 0.5
-    targets = np.repeat(positions[:, -1:], scenario.pursuers, axis=1)
-    for g, game in enumerate(cells.tolist()):
-        far = _distances(scenario, *game[-1])
-        for i, (x, y) in enumerate(game[:-1]):
-            if far[y, x] <= 1:
-                continue  # by the evader, or cut off from it: straight at it
-            around = [(x + dx, y + dy) for dx, dy in _STEPS]
-            steps = [far[b, a] if 0 <= a <= top and 0 <= b <= top else -1 for a, b in around]
-            best = min((d, k) for k, d in enumerate(steps) if d >= 0)[1]
-            targets[g, i] = np.array(around[best]) + centre
-    return targets
-
-
-@lru_cache(maxsize=4096)
-def _distances(scenario: Scenario, x: int, y: int) -> np.ndarray:
-    """Steps ``(size, size)`` (``[y, x]``) from every free cell to cell ``(x, y)`` over the
-    free cells, 4-connected; -1 where blocked or unreachable (read only: it is cached)."""
-    n = scenario.size
-    blocked = scenario.blocked_cells().reshape(n, n)
-    far = np.full((n, n), -1, dtype=np.int64)
-    far[y, x] = 0
-    frontier = [(x, y)]
-    while frontier:
-        later = []
-        for cx, cy in frontier:
-            for dx, dy in _STEPS:
-                ax, ay = cx + dx, cy + dy
-                if 0 <= ax < n and 0 <= ay < n and far[ay, ax] < 0 and not blocked[ay, ax]:
-                    far[ay, ax] = far[cy, cx] + 1
-                    later.append((ax, ay))
-        frontier = later
-    far.flags.writeable = False
-    return far
+    ahead = np.stack([best % scenario.size, best // scenario.size], axis=-1) + centre
+    straight = far[evader, pursuers] <= 1  # by the evader, or cut off from it
+    return np.where(straight[..., None], positions[:, -1:], ahead)

@@ -39,7 +39,10 @@ class NamedPolicy:
 
 NAMED_POLICIES: tuple[NamedPolicy, ...] = (
     NamedPolicy("random", "pursuers", "uniformly random moves (or commands in the unit square)"),
-    NamedPolicy("pursuit", "pursuers", "each pursuer straight at the evader"),
+    NamedPolicy(
+        "pursuit", "pursuers",
+        "each pursuer straight at the evader (around obstacles, along a shortest path)",
+    ),
     NamedPolicy(
         "oracle", "pursuers",
         "the exact optimum against the scenario's scripted evader (the random one where the"

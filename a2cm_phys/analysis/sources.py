@@ -113,7 +113,10 @@ def pursuer_source(
     if spec == "random":
         return Source(uniform_table(scenario, n), "uniformly random pursuers")
     if spec == "pursuit":
-        return Source(pursuit_table(scenario), "pursuit (each pursuer straight at the evader)")
+        return Source(
+            pursuit_table(scenario),
+            "pursuit (each pursuer straight at the evader, around obstacles)",
+        )
     if spec == "minimax":
         from ..solve.minimax import minimax_bounds
 
