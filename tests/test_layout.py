@@ -195,11 +195,7 @@ def test_the_checks_see_what_they_look_for(tmp_path, monkeypatch, case):
 LIMITS = {"file": 400, "class": 150, "function": 80}
 """The largest room of each kind, in lines (issue 30)."""
 
-KEPT_LARGE: dict[str, str] = {
-    # issue 46 grew the physics worlds by differential drive and obstacles; to be split
-    "a2cm_phys/envs/worlds.py:Worlds": "the substep-major loop of differential drive",
-    "a2cm_phys/envs/workers.py:ProcessCore": "headings through shared memory (issue 46)",
-}
+KEPT_LARGE: dict[str, str] = {}
 """``path:name`` -> why it stays over its limit (its docstring says so too)."""
 
 

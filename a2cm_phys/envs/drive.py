@@ -98,7 +98,7 @@ class DrivePlan:
         """Write the next substep's commands to ``out`` ``(3, B, N)``: the velocity servo's
         target ``(vx, vy)`` and the torque, from the pursuers' rotations ``(2, B, N)``
         ``(cos θ, sin θ)``, angles ``θ`` and angular velocities ``(B, N)`` as it starts
-        (component first, as :meth:`~.worlds.Worlds.drive` reads them)."""
+        (component first, as :meth:`~.drive_worlds.DriveWorlds.drive` reads them)."""
         if self._heading is None:
             forward, rate = self._forward, self._turn
         else:

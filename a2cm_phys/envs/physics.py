@@ -19,7 +19,7 @@ in its first step and exactly ``max_speed · dt`` per step once at speed.
 
 With ``physics.drive = "differential"`` the pursuers have headings (``(B, N, 2)`` ``(cos θ,
 sin θ)``, appended to the observation) and are steered substep by substep (:mod:`.drive`,
-:meth:`~.worlds.Worlds.drive`); every reset starts them at heading 0 (+x). With obstacles
+:meth:`~.drive_worlds.DriveWorlds.drive`); every reset starts them at heading 0 (+x). With obstacles
 (:mod:`.obstacles`), a step's outcome also counts the wall contacts that were with one.
 """
 
@@ -43,6 +43,7 @@ from .core import (
     settle,
 )
 from .drive import DrivePlan
+from .drive_worlds import DriveWorlds
 from .evaders import make_evader
 from .evaders.learned import refuse_evader_actions
 from .obstacles import check_thickness, obstacle_overlaps
@@ -167,7 +168,8 @@ class PhysicsCore(StateViews):
         self._give = getattr(self._evader, "give", None)  # a learned evader's mailbox
         self._continuous = scenario.continuous
         self._velocities = (ACTION_DELTAS * ph.max_speed).astype(np.float64)  # (moves, 2)
-        self._worlds = Worlds(scenario, num_envs, self._start)
+        worlds = DriveWorlds if scenario.differential else Worlds
+        self._worlds = worlds(scenario, num_envs, self._start)
         self._state = np.zeros((num_envs, 2, n + 1, 2))  # [game, position|velocity, agent, xy]
         self._state[:, 0] = self._start
         self._headings = rest_headings(scenario, num_envs)

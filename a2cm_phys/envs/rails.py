@@ -29,8 +29,8 @@ rad at most, while the anchor's rounding stays near 1e-13 m."""
 
 class Turning(NamedTuple):
     """A differential-drive pursuer's per-body calls (:func:`~.chipmunk.accessor`): what
-    :class:`~.worlds.Worlds` reads and writes each substep where memory cannot be reached,
-    and what :meth:`World.rebuild` resets."""
+    :class:`~.drive_worlds.DriveWorlds` reads and writes each substep where memory cannot
+    be reached, and what :meth:`World.rebuild` resets."""
 
     velocity: Callable[[], Any]
     rotation: Callable[[], Any]

@@ -43,6 +43,18 @@ from .starts import random_starts
 from .worker_pool import WorkerError, WorkerPool
 
 
+def _check_arguments(
+    scenario: Scenario, num_envs: int, workers: int, timeout: float | None
+) -> None:
+    """Raise ``ValueError`` naming a :class:`ProcessCore` argument it cannot take."""
+    if scenario.mode != "physics":
+        raise ValueError(f"ProcessCore needs a physics scenario, got mode={scenario.mode!r}")
+    if not 1 <= workers <= num_envs:
+        raise ValueError(f"workers must be in [1, num_envs={num_envs}], got {workers}")
+    if timeout is not None and not timeout > 0:
+        raise ValueError(f"timeout must be positive seconds or None, got {timeout!r}")
+
+
 class ProcessCore(StateViews):
     """``num_envs`` physics games stepped by ``workers`` processes: this one and
     ``workers - 1`` worker processes (implements ``core.Core``).
@@ -55,9 +67,7 @@ class ProcessCore(StateViews):
     ``start_method`` is multiprocessing's (default: the platform's; ``spawn`` and
     ``forkserver`` need the usual ``if __name__ == "__main__":`` guard in the calling
     script). ``spares`` is how many worlds each process rebuilds ahead while idle (default:
-    a quarter of its games, plus one; see :meth:`PhysicsCore.build_spare`).
-
-    Over the layout test's size limit since issue 46 (``KEPT_LARGE``): to be split."""
+    a quarter of its games, plus one; see :meth:`PhysicsCore.build_spare`)."""
 
     def __init__(
         self,
@@ -68,12 +78,7 @@ class ProcessCore(StateViews):
         spares: int | None = None,
         timeout: float | None = 120.0,
     ) -> None:
-        if scenario.mode != "physics":
-            raise ValueError(f"ProcessCore needs a physics scenario, got mode={scenario.mode!r}")
-        if not 1 <= workers <= num_envs:
-            raise ValueError(f"workers must be in [1, num_envs={num_envs}], got {workers}")
-        if timeout is not None and not timeout > 0:
-            raise ValueError(f"timeout must be positive seconds or None, got {timeout!r}")
+        _check_arguments(scenario, num_envs, workers, timeout)
         self.scenario = scenario
         self.num_envs = num_envs
         self.timeout = timeout
