@@ -105,11 +105,18 @@ def range_readings(scenario: Scenario, body: np.ndarray, positions: np.ndarray) 
     """Every agent's range sensor (``sensing.rays``) as fractions of ``sensing.range``,
     ``(B, N + 1, rays)`` float32, from the bodies' features ``(B, N + 1, k)`` (headings with
     differential drive) and positions ``(B, N + 1, 2)`` metres (:func:`~.rays.cast_rays`)."""
-    ph, sensing, n = scenario.physics, scenario.sensing, scenario.pursuers
+    n = scenario.pursuers
     headings = None
     if scenario.differential:
         headings = np.arctan2(body[:, :n, 5].astype(np.float64), body[:, :n, 4])
-    reach = cast_rays(
+    return (_reach(scenario, positions, headings) / scenario.sensing.range).astype(np.float32)
+
+
+def _reach(scenario: Scenario, positions: np.ndarray, headings: np.ndarray | None) -> np.ndarray:
+    """:func:`~.rays.cast_rays` in the scenario's arena: readings ``(B, N + 1, rays)`` m
+    from positions ``(B, N + 1, 2)`` and the pursuers' angles ``(B, N)`` (or ``None``)."""
+    ph, sensing = scenario.physics, scenario.sensing
+    return cast_rays(
         positions,
         headings,
         sensing.rays,
@@ -119,7 +126,6 @@ def range_readings(scenario: Scenario, body: np.ndarray, positions: np.ndarray) 
         ph.evader_radius,
         scenario.obstacles,
     )
-    return (reach / sensing.range).astype(np.float32)
 
 
 def ray_segments(
@@ -129,22 +135,13 @@ def ray_segments(
     ``(N, rays, 2)`` metres, from the centres ``positions`` ``(N + 1, 2)`` (metres) and the
     pursuers' ``headings`` ``(N, 2)`` ``(cos θ, sin θ)`` (differential drive; ``None``:
     holonomic)."""
-    ph, sensing, n = scenario.physics, scenario.sensing, scenario.pursuers
+    n = scenario.pursuers
     xy = np.asarray(positions, dtype=np.float64)
     angle = None
     if headings is not None:
         angle = np.arctan2(np.asarray(headings, dtype=np.float64)[:, 1], headings[:, 0])
-    reach = cast_rays(
-        xy[None],
-        None if angle is None else angle[None],
-        sensing.rays,
-        sensing.range,
-        scenario.size,
-        ph.box_side,
-        ph.evader_radius,
-        scenario.obstacles,
-    )[0, :n]
-    world = ray_angles(sensing.rays, angle, (n,))
+    reach = _reach(scenario, xy[None], None if angle is None else angle[None])[0, :n]
+    world = ray_angles(scenario.sensing.rays, angle, (n,))
     starts = np.broadcast_to(xy[:n, None, :], (*world.shape, 2))
     ends = starts + reach[..., None] * np.stack([np.cos(world), np.sin(world)], -1)
     return starts, ends

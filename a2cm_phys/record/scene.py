@@ -47,6 +47,7 @@ from .scene_shapes import (
     arena_primitives,
     centres_of,
     cube,
+    line,
     obstacle_primitives,
     pose,
     rgba,
@@ -132,15 +133,7 @@ def _trails(centres: np.ndarray, z: float) -> list[LinePrimitive]:
         last = i == centres.shape[1] - 1
         colour = EVADER_COLOUR if last else PURSUER_COLOURS[i % len(PURSUER_COLOURS)]
         points = [Point3(x=float(x), y=float(y), z=z) for x, y in centres[:, i].tolist()]
-        out.append(
-            LinePrimitive(
-                type=LinePrimitiveLineType.LineStrip,
-                pose=pose(0, 0, 0),
-                thickness=0.05,
-                points=points,
-                color=rgba(colour, 0.5),
-            )
-        )
+        out.append(line(LinePrimitiveLineType.LineStrip, points, 0.05, rgba(colour, 0.5)))
     return out
 
 

@@ -17,7 +17,7 @@ from ..config import Scenario
 from ..envs.render import PURSUER_COLOURS
 from ..envs.sensing import ray_segments
 from .masks import in_range
-from .scene_shapes import centres_of, cube, pose, rgba
+from .scene_shapes import centres_of, cube, line, pose, rgba
 
 _RANGE_ALPHA = 0.12  # a pursuer's sensing range: faint, the agents stay in front
 
@@ -67,16 +67,8 @@ def _rays(scenario: Scenario, positions: np.ndarray, headings: np.ndarray | None
         points = []
         for (x0, y0), (x1, y1) in zip(starts[i].tolist(), ends[i].tolist(), strict=True):
             points += [Point3(x=x0, y=y0, z=z), Point3(x=x1, y=y1, z=z)]
-        colour = PURSUER_COLOURS[i % len(PURSUER_COLOURS)]
-        lines.append(
-            LinePrimitive(
-                type=LinePrimitiveLineType.LineList,
-                pose=pose(0, 0, 0),
-                thickness=0.02,
-                points=points,
-                color=rgba(colour, 0.6),
-            )
-        )
+        colour = rgba(PURSUER_COLOURS[i % len(PURSUER_COLOURS)], 0.6)
+        lines.append(line(LinePrimitiveLineType.LineList, points, 0.02, colour))
     return lines
 
 

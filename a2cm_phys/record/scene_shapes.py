@@ -56,6 +56,15 @@ def cube(
     )
 
 
+def line(
+    kind: LinePrimitiveLineType, points: list[Point3], thickness: float, colour: Color
+) -> LinePrimitive:
+    """A line of ``kind`` (strip, loop or list) through ``points`` in the arena's frame."""
+    return LinePrimitive(
+        type=kind, pose=pose(0, 0, 0), thickness=thickness, points=points, color=colour
+    )
+
+
 def text(x: float, y: float, z: float, text: str, size: float = 0.3) -> TextPrimitive:
     """Black text facing the camera at ``(x, y, z)``."""
     return TextPrimitive(
