@@ -174,6 +174,36 @@ def test_descent_steps_lower_the_worst_case() -> None:
 
 
 @pytest.mark.parametrize("teams", ["pursuers", "both"])
+def test_a_linear_descent_schedule_anneals_the_step_to_zero(teams: str) -> None:
+    """At the run's start the linear schedule steps as the constant one does (the same
+    weights, bit for bit); at its end its step size is 0 and no actor moves, while the
+    constant schedule's still do."""
+    scenario = small()
+
+    def descent(schedule: str) -> ExploitabilityDescent:
+        options = {"descent_every": 1, "descent_teams": teams, "descent_schedule": schedule}
+        cfg = resolve_train(scenario, load_train(options))
+        pursuers, evader = make_teams(scenario, cfg)
+        return ExploitabilityDescent(scenario, cfg, pursuers.model, 0, evader.model)
+
+    def actors(d: ExploitabilityDescent) -> list[torch.Tensor]:
+        models = [d.model] if d.evader is None else [d.model, d.evader]
+        return [p.detach().clone() for m in models for k, p in m.named_parameters()
+                if k.startswith("actor_")]  # fmt: skip
+
+    constant, linear = descent("constant"), descent("linear")
+    constant.step(0.0)
+    linear.step(0.0)
+    for a, b in zip(actors(constant), actors(linear), strict=True):
+        assert torch.equal(a, b)
+    before = actors(linear)
+    linear.step(1.0)
+    assert all(torch.equal(a, b) for a, b in zip(before, actors(linear), strict=True))
+    constant.step(1.0)
+    assert not all(torch.equal(a, b) for a, b in zip(before, actors(constant), strict=True))
+
+
+@pytest.mark.parametrize("teams", ["pursuers", "both"])
 def test_descent_state_round_trips(teams: str) -> None:
     scenario = small()
     cfg = resolve_train(scenario, load_train({"descent_every": 1, "descent_teams": teams}))

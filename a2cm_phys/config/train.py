@@ -93,6 +93,7 @@ class Train:
     descent_every: int = 0  # 0: off (the pursuers learn from their rollouts)
     descent_steps: int = 1  # actor steps per best response
     descent_lr: float = 1e-3  # Adam's step size for them
+    descent_schedule: Schedule = "constant"  # "linear": descent_lr · (1 − progress)
     descent_teams: DescentTeams = "pursuers"  # who learns by descent
 
     def validate(self) -> None:

@@ -8,7 +8,9 @@ the exact best response is computable, and so is the gradient of its value in th
 pursuers' policy (:mod:`a2cm_phys.solve.worst_case`). With ``descent_every = K`` the
 pursuers' actors learn from that gradient alone: every K updates
 :class:`ExploitabilityDescent` computes it for their current actors and takes
-``descent_steps`` Adam steps (step size ``descent_lr``) along it. The rollouts go on as in
+``descent_steps`` Adam steps (step size ``descent_lr``, or with ``descent_schedule =
+"linear"`` that size annealed linearly to 0 over the run, as ``lr_schedule`` anneals the
+learner's) along it. The rollouts go on as in
 any self-play run (the pursuers playing their sampled moves), and the learned evader
 learns from every one of them by A2C. The pursuers' learner is not stepped: mixing its
 rollout gradient in (``BENCHMARKS.md``, "Exploitability descent") drew the team back
@@ -90,6 +92,7 @@ class ExploitabilityDescent:
 
         check_descent(scenario, cfg)
         self.scenario, self.model, self.steps = scenario, model, cfg.descent_steps
+        self.lr, self.schedule = cfg.descent_lr, cfg.descent_schedule
         self.gradient = WorstCaseGradient(scenario, cfg.gamma)
         self.optimizer = _actor_adam(model, cfg.descent_lr)
         self.rng = descent_rng(seed)
@@ -104,9 +107,17 @@ class ExploitabilityDescent:
             self.evader_optimizer = _actor_adam(self.evader, cfg.descent_lr)
             self.evader_rng = evader_descent_rng(seed)
 
-    def step(self) -> dict[str, float]:
-        """One best response to each learning team and ``descent_steps`` actor steps each;
-        the metrics to log."""
+    def step(self, progress: float = 0.0) -> dict[str, float]:
+        """One best response to each learning team and ``descent_steps`` actor steps each,
+        ``progress`` (the run's fraction done) through it setting the step size under a
+        linear ``descent_schedule``; the metrics to log."""
+        if self.schedule == "linear":
+            optimizers = [self.optimizer]
+            if self.evader is not None:
+                optimizers.append(self.evader_optimizer)
+            for optimizer in optimizers:
+                for group in optimizer.param_groups:
+                    group["lr"] = self.lr * (1.0 - progress)
         table = model_table(self.scenario, self.model, self.scenario.pursuers)
         value = self.last_value = self.gradient.refresh(table)
         rows, visits = self.gradient.visits(self.rng)

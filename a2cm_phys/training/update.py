@@ -44,7 +44,7 @@ def learn(run: RunState, pairing: Pairing, metrics: dict[str, float]) -> None:
         metrics["pool_pairing"] = PAIRING_CODES[pairing.kind]
         metrics["pool_snapshot_update"] = pairing.taken_at
     if descent is not None and (run.update + 1) % cfg.descent_every == 0:
-        metrics.update(descent.step())
+        metrics.update(descent.step(progress))
     every = cfg.exploit_every
     if every and (run.update + 1) % every == 0 and solvable(run.scenario):
         assert evader is not None
