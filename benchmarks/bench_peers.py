@@ -3,7 +3,7 @@
     python benchmarks/bench_peers.py [--scenarios grid_collision,grid_random]
         [--algos a2cm,a2c,mappo,ippo] [--variants defaults,tuned] [--seeds 0-2]
         [--steps 640000] [--episodes 2000] [--jobs 2] [--out benchmarks/results/peers.jsonl]
-        [--figure benchmarks/results/peers.png]
+        [--figure benchmarks/results/peers.png] [--curve-every 50000 --curve-episodes 500]
 
 Each run trains on ``--steps`` environment steps (all games) and its team is then played
 greedily by our own evaluation (:func:`a2cm_phys.analysis.evaluation.play`, the same
@@ -21,6 +21,12 @@ batched games:
   parameters shared within the team); the rewards as the scenario gives them;
 - ``tuned``: the small tuning budget, stated: rewards divided by the step penalty's size
   (a step costs 1), Adam 3e-4, 10 epochs, 64 games a batch (everything else the defaults).
+
+With ``--curve-every K`` every learner's greedy team is also played on ``--curve-episodes``
+games (the same for every learner and point: seed 2000 + seed) each time another K
+environment steps have been trained on, and at the end: the row's ``curve``, and from it
+the steps it took to come within 5% of the reference (``steps_to_5pct``; ``None``: never
+within the run). The evaluations' time is not counted in the training time.
 
 Results go to ``--out`` as JSON lines as they come (a rerun skips the rows already there);
 the table printed at the end gives per scenario, learner and variant the median over
@@ -42,7 +48,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import torch
 from benchmarl.algorithms import IppoConfig, MappoConfig
-from benchmarl.experiment import Experiment, ExperimentConfig
+from benchmarl.experiment import Callback, Experiment, ExperimentConfig
 from benchmarl.models.mlp import MlpConfig
 
 from a2cm_phys.analysis.evaluation import optimum, play
@@ -55,19 +61,70 @@ from a2cm_phys.training.runs import model_policy
 from a2cm_phys.training.trainer import Trainer
 
 OURS, PEERS = ("a2cm", "a2c"), ("mappo", "ippo")
+WITHIN = 1.05  # steps_to_5pct: the first curve point at most this × the reference
 
 
-def _train_ours(job: dict, sc, tmp: str):
+class Curve:
+    """The greedy team played every ``job["curve_every"]`` steps trained on (none when 0):
+    ``points`` ``[steps, mean capture steps, capture rate]``, and the seconds spent
+    playing (``seconds``), to be taken off the training time."""
+
+    def __init__(self, job: dict, sc) -> None:
+        self.job, self.sc, self.points, self.seconds = job, sc, [], 0.0
+        self.next = job["curve_every"] or float("inf")
+
+    def due(self, steps: int, last: bool = False) -> bool:
+        """Whether ``steps`` trained on calls for a point (always at the end)."""
+        return steps >= self.next or (last and bool(self.job["curve_every"]))
+
+    def add(self, steps: int, policy) -> None:
+        """Play ``policy`` (greedy) and note the point."""
+        start = time.perf_counter()
+        got = play(self.sc, policy, self.job["curve_episodes"], 16, 2000 + self.job["seed"])
+        self.points.append([steps, float(got.lengths.mean()), float(got.captured.mean())])
+        while self.next <= steps:
+            self.next += self.job["curve_every"]
+        self.seconds += time.perf_counter() - start
+
+
+def _train_ours(job: dict, sc, tmp: str, curve: Curve):
     values = {"algo": job["algo"], "seed": job["seed"]}
     batch = resolve_train(sc, load_train(values)).batch_size  # the defaults' batch
     cfg = resolve_train(sc, load_train({**values, "updates": job["steps"] // batch}))
-    trainer = Trainer(sc, cfg, tmp, record=False, progress=False)
+
+    class Traced(Trainer):
+        """The trainer, its greedy team played as the curve asks."""
+
+        def _one_update(self, on_step) -> None:
+            super()._one_update(on_step)
+            steps = self.update * cfg.batch_size
+            if curve.due(steps, last=self.update == cfg.updates):
+                curve.add(steps, model_policy(self.model, greedy=True))
+
+    trainer = Traced(sc, cfg, tmp, record=False, progress=False)
     if trainer.run() != "done":
         raise RuntimeError(f"{job}: the run did not finish")
     return model_policy(trainer.model, greedy=True)
 
 
-def _train_peer(job: dict, sc, tmp: str):
+class _PeerCurve(Callback):
+    """BenchMARL's hook after each training step: the pursuers' greedy team played as the
+    curve asks."""
+
+    def __init__(self, curve: Curve) -> None:
+        super().__init__()
+        self.curve = curve
+
+    def on_train_end(self, training_td, group: str) -> None:
+        exp = self.experiment
+        if group != "pursuers":
+            return
+        last = exp.total_frames >= exp.config.max_n_frames
+        if self.curve.due(exp.total_frames, last):
+            self.curve.add(exp.total_frames, team_policy(self.curve.sc, exp.policy, greedy=True))
+
+
+def _train_peer(job: dict, sc, tmp: str, curve: Curve):
     cfg = ExperimentConfig.get_from_yaml()
     cfg.max_n_frames = job["steps"]
     cfg.loggers, cfg.evaluation, cfg.render, cfg.create_json = [], False, False, False
@@ -81,7 +138,7 @@ def _train_peer(job: dict, sc, tmp: str):
     model = MlpConfig.get_from_yaml()
     exp = Experiment(task=task, algorithm_config=algo, model_config=model,
                      critic_model_config=MlpConfig.get_from_yaml(), seed=job["seed"],
-                     config=cfg)  # fmt: skip
+                     config=cfg, callbacks=[_PeerCurve(curve)])  # fmt: skip
     exp.run()
     return team_policy(sc, exp.policy, greedy=True)
 
@@ -90,19 +147,25 @@ def run_one(job: dict) -> dict:
     """Train one learner and play it greedily: the row of the results file."""
     torch.set_num_threads(1)
     sc = load_scenario(job["scenario"])
+    curve = Curve(job, sc)
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
         train = _train_ours if job["algo"] in OURS else _train_peer
-        policy = train(job, sc, tmp)
-        seconds = time.perf_counter() - start
+        policy = train(job, sc, tmp, curve)
+        seconds = time.perf_counter() - start - curve.seconds
     result = play(sc, policy, job["episodes"], 16, 1000 + job["seed"])
-    return {
+    row = {
         **{k: job[k] for k in ("scenario", "algo", "variant", "seed", "steps", "episodes")},
         "mean_steps": float(result.lengths.mean()),
         "capture_rate": float(result.captured.mean()),
         "collisions": float(result.collisions.mean()),
         "train_seconds": seconds,
     }
+    if job["curve_every"]:
+        goal = WITHIN * reference_steps(job["scenario"], job["episodes"])
+        first = next((p[0] for p in curve.points if p[1] <= goal), None)
+        row.update(curve=curve.points, curve_episodes=job["curve_episodes"], steps_to_5pct=first)
+    return row
 
 
 def reference_steps(scenario: str, episodes: int) -> float:
@@ -118,8 +181,8 @@ def table(rows: list[dict]) -> str:
     """The medians over seeds, per scenario, learner and variant."""
     lines = [
         "| scenario | learner | variant | steps | greedy ÷ reference (seeds) | median | "
-        "captured | collisions a game | train s |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "captured | collisions a game | train s | steps to within 5% (seeds) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     refs: dict[str, float] = {}
     groups: dict[tuple, list[dict]] = {}
@@ -136,9 +199,19 @@ def table(rows: list[dict]) -> str:
             f"**{statistics.median(ratios):.3f}** | "
             f"{statistics.median(r['capture_rate'] for r in rs):.3f} | "
             f"{statistics.median(r['collisions'] for r in rs):.3f} | "
-            f"{statistics.median(r['train_seconds'] for r in rs):.0f} |"
+            f"{statistics.median(r['train_seconds'] for r in rs):.0f} | {_reach(rs)} |"
         )
     return "\n".join(lines)
+
+
+def _reach(rows: list[dict]) -> str:
+    """The steps to within 5% of the seeds that were traced: each seed's, "no" for one
+    that never came within the run, "—" where no seed was traced."""
+    traced = [r for r in rows if "curve" in r]
+    if not traced:
+        return "—"
+    return ", ".join("no" if r["steps_to_5pct"] is None else f"{r['steps_to_5pct']:,}"
+                     for r in traced)  # fmt: skip
 
 
 def figure(rows: list[dict], path: Path) -> None:
@@ -180,12 +253,15 @@ def main() -> None:
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--out", type=Path, default=Path("benchmarks/results/peers.jsonl"))
     p.add_argument("--figure", type=Path, help="also draw the runs to this PNG")
+    p.add_argument("--curve-every", type=int, default=0, help="steps between curve points")
+    p.add_argument("--curve-episodes", type=int, default=500)
     args = p.parse_args()
     rows = [json.loads(x) for x in args.out.read_text().splitlines()] if args.out.exists() else []
     done = {(r["scenario"], r["algo"], r["variant"], r["seed"], r["steps"]) for r in rows}
     jobs = [
         {"scenario": s, "algo": a, "variant": v, "seed": seed, "steps": args.steps,
-         "episodes": args.episodes}
+         "episodes": args.episodes, "curve_every": args.curve_every,
+         "curve_episodes": args.curve_episodes}
         for s in args.scenarios.split(",") for seed in parse_seeds(args.seeds)
         for a in args.algos.split(",")
         for v in (["ours"] if a in OURS else args.variants.split(","))
