@@ -235,3 +235,19 @@ def test_a_sweep_without_a_terminal_says_which_run_goes_on_every_interval(
     assert lines[0] == "sweep: started (1 runs)" and lines[-1].startswith("sweep: done, 1/1 runs")
     assert any(line.startswith("sweep: 0/1 runs (0%)") and "now grid-a2cm-s0" in line
                for line in lines[1:-1]), lines  # fmt: skip
+
+
+def test_a_run_written_before_a_scenario_key_existed_is_still_this_run(tmp_path, capsys):
+    """A run whose ``config.json`` predates a scenario key (here ``start``, added with
+    random starts) holds that key's default: the sweep skips it as done, as it skips
+    training keys added since, instead of calling it another configuration."""
+    assert _sweep(tmp_path) == 0
+    path = tmp_path / "sweep" / "grid-a2cm-s0" / "config.json"
+    config = json.loads(path.read_text())
+    assert config["scenario"].pop("start")["kind"] == "fixed"
+    path.write_text(json.dumps(config))
+    capsys.readouterr()
+    assert _sweep(tmp_path) == 0
+    assert "grid-a2cm-s0: skipped" in "".join(capsys.readouterr())
+    assert _sweep(tmp_path, "--set", "start=random") == 2  # the default, not any start
+    assert "scenario.start.kind: 'fixed' there, 'random' now" in capsys.readouterr().err

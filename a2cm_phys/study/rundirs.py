@@ -14,7 +14,7 @@ import signal
 from pathlib import Path
 from typing import Any
 
-from ..config import ConfigError, stored_train, to_dict
+from ..config import ConfigError, Scenario, build, stored_train, to_dict
 from ..training.rundir import (
     CHECKPOINT_NAME,
     CONFIG_NAME,
@@ -84,8 +84,11 @@ def _wanted(spec: RunSpec) -> dict[str, Any]:
 
 
 def _normalised(stored: dict[str, Any]) -> dict[str, Any]:
-    """A stored run's config completed for training keys added after it was written."""
-    return {"scenario": stored["scenario"], "train": stored_train(stored["train"])}
+    """A stored run's config completed for the keys added after it was written: the
+    scenario's by building it as a resume does (a key it lacks holds its default, e.g.
+    the fixed ``start``), the training config's by :func:`~a2cm_phys.config.stored_train`."""
+    scenario = build(Scenario, stored["scenario"], "the run's scenario")
+    return {"scenario": _plain(scenario), "train": stored_train(stored["train"])}
 
 
 def existing_runs(sweep_dir: Path) -> dict[Path, dict[str, Any]]:
