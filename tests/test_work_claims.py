@@ -9,6 +9,8 @@ from pathlib import Path
 from a2cm_phys.study.report.work_claims import (
     oracle_claims,
     parity_claims,
+    peer_claims,
+    random_start_claims,
     recurrent_claims,
     scale_claims,
     speed_claims,
@@ -17,11 +19,10 @@ from a2cm_phys.study.report.work_claims import (
 )
 
 
-def pomdp_rows(memoryless: list[float], recurrent: list[float]) -> list[dict]:
-    rows = [{"scenario": "grid_pomdp", "algo": "a2cm", "recurrent": "none", "mean_steps": x}
-            for x in memoryless]  # fmt: skip
-    rows += [{"scenario": "grid_pomdp", "algo": "a2cm", "recurrent": "gru", "mean_steps": x}
-             for x in recurrent]  # fmt: skip
+def pomdp_rows(memoryless: list[float], recurrent: list[float], steps: int = 640_000) -> list:
+    row = {"scenario": "grid_pomdp", "algo": "a2cm", "train_steps": steps}
+    rows = [{**row, "recurrent": "none", "mean_steps": x} for x in memoryless]
+    rows += [{**row, "recurrent": "gru", "mean_steps": x} for x in recurrent]
     return rows
 
 
@@ -34,6 +35,44 @@ def test_recurrent_target_verdicts() -> None:
     (one,) = recurrent_claims(pomdp_rows([4.0], [3.0]))
     assert one.verdict == "inconclusive" and one.evidence == "n = 1"
     assert recurrent_claims(pomdp_rows([], [3.0])) == []  # nothing to compare with
+
+
+def test_recurrent_claims_compare_runs_of_equal_steps() -> None:
+    """A scenario trained for two budgets (the 9×9 runs, then longer) gets a claim per
+    budget, each recurrent team against the memoryless one of its own budget."""
+    rows = pomdp_rows([4.0, 4.1, 4.05], [3.9, 4.0, 4.0])
+    rows += pomdp_rows([3.6, 3.7, 3.65], [2.5, 2.55, 2.6], steps=2_560_000)
+    short, long = recurrent_claims(rows)
+    assert short.scope == "grid_pomdp, A2CM, 640,000 steps" and short.verdict == "does not hold"
+    assert long.scope == "grid_pomdp, A2CM, 2,560,000 steps" and long.verdict == "holds"
+
+
+def test_random_start_targets_against_the_optimum_over_starts() -> None:
+    def row(scenario: str, steps: float, optimum: float) -> dict:
+        own = {"steps": steps, "optimum": optimum, "collisions": 0.1, "capture_rate": 1.0}
+        return {"scenario": scenario, "algo": "a2cm", "own": own}
+
+    rows = [row("grid_random", x, 2.575) for x in (2.66, 2.67, 2.665)]
+    rows += [row("grid_collision_random", x, 2.579) for x in (2.9, 2.92, 2.89)]
+    rows += [row("grid_collision", 2.94, 2.939)]  # the fixed start: no such target here
+    collision, plain = random_start_claims(rows)
+    assert plain.verdict == "holds" and plain.sizes == (3,) and "issue 45" in plain.claim
+    assert collision.verdict == "does not hold" and "optimum 2.5790" in collision.scope
+
+
+def test_peer_claims_pair_seeds_at_equal_steps() -> None:
+    def row(algo: str, seed: int, steps: float, variant: str = "tuned") -> dict:
+        return {"scenario": "grid_collision", "steps": 640_000, "algo": algo, "seed": seed,
+                "variant": "ours" if algo.startswith("a2c") else variant,
+                "mean_steps": steps}  # fmt: skip
+
+    rows = [row("a2cm", k, 2.95) for k in range(3)]
+    rows += [row("mappo", k, x) for k, x in enumerate((9.0, 5.0, 9.5))]
+    rows += [row("ippo", 0, 2.9), row("ippo", 7, 1.0)]  # seed 7 has no A2CM run to pair with
+    rows += [row("mappo", 0, 1.0, "defaults"), row("a2c", 0, 1.0)]  # neither is compared
+    ippo, mappo = peer_claims(rows)
+    assert mappo.verdict == "holds" and mappo.sizes == (3,) and "MAPPO" in mappo.claim
+    assert ippo.sizes == (1,) and ippo.verdict == "inconclusive"
 
 
 def scale_row(config: str, seed: int, steps: float, reference: float, policy: str) -> dict:

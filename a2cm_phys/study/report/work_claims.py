@@ -1,5 +1,6 @@
 """Claims on the later issues' work, each with its target: partial observability and
-recurrent actors (issue 33), export to ONNX (issue 34), scale and speed (issue 35).
+recurrent actors (issue 33), export to ONNX (issue 34), scale and speed (issue 35), random
+starts (issue 45) and the peers' algorithms (issue 47).
 
 Partial observability, scale and speed are measured by the benchmarks, which record their
 runs in ``benchmarks/results/*.jsonl`` (``--bench-records``); the report reads those
@@ -33,27 +34,43 @@ SPEED_TARGET = 0.5
 """Issue 35: the job as typed in at most half the time of the peer (61cf8cf)."""
 TOLERANCE = 1e-5
 """Issue 34: exported actors' outputs within this of torch's (relative beyond 1)."""
+RANDOM_START_TARGETS = {"grid_random": 1.05, "grid_collision_random": 1.05}
+"""Issue 45: greedy capture steps from random starts at most this × the exact optimum over
+the start distribution, with the shipped defaults."""
+PEERS = ("mappo", "ippo")
+"""Issue 47: the peers' algorithms (BenchMARL's) A2CM is measured against."""
+POMDP_RECORDS = ("pomdp", "pomdp_random", "pomdp9_long")
+"""The records of ``benchmarks/bench_pomdp.py``: the fixed start, random starts, and the
+9×9 random starts trained longer."""
 
 
 def read_records(folder: Path | None, name: str) -> list[dict[str, Any]]:
-    """The rows of ``folder/name.jsonl`` (none if there is no such file)."""
-    if folder is None or not (folder / f"{name}.jsonl").is_file():
+    """The rows of ``folder/name.jsonl``, or of the list in ``folder/name.json`` (none if
+    there is neither file)."""
+    if folder is None:
         return []
-    lines = (folder / f"{name}.jsonl").read_text().splitlines()
-    return [json.loads(line) for line in lines if line.strip()]
+    if (folder / f"{name}.jsonl").is_file():
+        lines = (folder / f"{name}.jsonl").read_text().splitlines()
+        return [json.loads(line) for line in lines if line.strip()]
+    if (folder / f"{name}.json").is_file():
+        return list(json.loads((folder / f"{name}.json").read_text()))
+    return []
 
 
 def work_claims(records: Path | None, parity: dict[str, list[dict[str, Any]]]) -> list[Claim]:
     """Every claim on the later issues' work that has data: the benchmarks' records in
     ``records`` and the export parity measured per cell (``parity``, by ``group/scenario/
     algo``)."""
+    pomdp = [row for name in POMDP_RECORDS for row in read_records(records, name)]
     return [
-        *recurrent_claims(read_records(records, "pomdp")),
+        *recurrent_claims(pomdp),
         *parity_claims(parity),
         *scale_claims(read_records(records, "scale_train")),
         *oracle_claims(read_records(records, "oracle_scale")),
         *speed_claims(read_records(records, "main_job")),
         *within_claims(read_records(records, "collision")),
+        *random_start_claims(read_records(records, "random_starts")),
+        *peer_claims(read_records(records, "peers")),
     ]
 
 
@@ -79,12 +96,19 @@ def ratio_claim(
 def recurrent_claims(rows: list[dict[str, Any]]) -> list[Claim]:
     """Issue 33, per scenario and algorithm: recurrent actors within
     :data:`RECURRENT_TARGET` × the memoryless actors' greedy capture steps."""
-    steps: dict[tuple[str, str, str], list[float]] = defaultdict(list)
+    steps: dict[tuple[str, int, str, str], list[float]] = defaultdict(list)
     for r in rows:
-        steps[(r["scenario"], r["algo"], r["recurrent"])].append(float(r["mean_steps"]))
+        key = (r["scenario"], int(r["train_steps"]), r["algo"], r["recurrent"])
+        steps[key].append(float(r["mean_steps"]))
+    trained: dict[str, set[int]] = defaultdict(set)  # the step budgets of each scenario
+    for scenario, budget, _, _ in steps:
+        trained[scenario].add(budget)
     out = []
-    for (scenario, algo, memory), recurrent in sorted(steps.items()):
-        memoryless = steps.get((scenario, algo, "none"))
+    for (scenario, budget, algo, memory), recurrent in sorted(steps.items()):
+        memoryless = steps.get((scenario, budget, algo, "none"))
+        scope = f"{scenario}, {algo.upper()}"
+        if len(trained[scenario]) > 1:
+            scope += f", {budget:,} steps"
         if memory == "none" or not memoryless:
             continue
         ratio = ratio_interval(recurrent, memoryless)
@@ -93,7 +117,7 @@ def recurrent_claims(rows: list[dict[str, Any]]) -> list[Claim]:
                 "ours",
                 f"Recurrent ({memory}) actors capture in at most {RECURRENT_TARGET}× the "
                 "memoryless actors' greedy steps (issue 33)",
-                f"{scenario}, {algo.upper()}",
+                scope,
                 f"{fmt(np.mean(recurrent))} vs {fmt(np.mean(memoryless))} steps ({ratio[0]:.3f}×)",
                 ci_text(ratio),
                 verdict_bound(ratio, at_most=RECURRENT_TARGET),
@@ -245,6 +269,61 @@ def within_claims(rows: list[dict[str, Any]]) -> list[Claim]:
                 ratios,
                 target,
                 "benchmarks/bench_collision.py --record",
+            )
+        )
+    return out
+
+
+def random_start_claims(rows: list[dict[str, Any]]) -> list[Claim]:
+    """Issue 45, per scenario of :data:`RANDOM_START_TARGETS` and algorithm: the shipped
+    defaults' greedy capture steps from random starts (``benchmarks/bench_random_starts.py``)
+    at most the target × the exact optimum over the start distribution."""
+    by: dict[tuple[str, str], list[dict[str, Any]]] = defaultdict(list)
+    for r in rows:
+        if r["scenario"] in RANDOM_START_TARGETS:
+            by[(r["scenario"], r["algo"])].append(r["own"])
+    out = []
+    for (scenario, algo), runs in sorted(by.items()):
+        target, optimum = RANDOM_START_TARGETS[scenario], float(runs[0]["optimum"])
+        out.append(
+            ratio_claim(
+                f"{algo.upper()} with the shipped defaults captures from random starts within "
+                f"{round(100 * (target - 1))}% of the exact optimum over them (issue 45)",
+                f"{scenario}, optimum {optimum:.4f} steps; "
+                f"{max(float(r['collisions']) for r in runs):.3f} collisions a game at most",
+                f"{np.mean([r['steps'] for r in runs]):.3f} steps",
+                [float(r["steps"]) / float(r["optimum"]) for r in runs],
+                target,
+                "benchmarks/bench_random_starts.py",
+            )
+        )
+    return out
+
+
+def peer_claims(rows: list[dict[str, Any]]) -> list[Claim]:
+    """Issue 47, per scenario, step budget and peer of :data:`PEERS` (its tuned settings):
+    A2CM's greedy capture steps at most the peer's, seed by seed at equal environment
+    steps (``benchmarks/bench_peers.py``)."""
+    steps: dict[tuple[str, int, str], dict[int, float]] = defaultdict(dict)
+    for r in rows:
+        if r["algo"] == "a2cm" or (r["algo"] in PEERS and r["variant"] == "tuned"):
+            steps[(r["scenario"], int(r["steps"]), r["algo"])][r["seed"]] = float(r["mean_steps"])
+    out = []
+    for (scenario, budget, algo), peer in sorted(steps.items()):
+        ours = steps.get((scenario, budget, "a2cm"), {})
+        seeds = sorted(set(ours) & set(peer))
+        if algo == "a2cm" or not seeds:
+            continue
+        out.append(
+            ratio_claim(
+                f"A2CM captures at least as fast as {algo.upper()} (BenchMARL, tuned) at "
+                "equal environment steps (issue 47)",
+                f"{scenario}, {budget:,} steps, greedy",
+                f"{np.mean([ours[k] for k in seeds]):.3f} vs "
+                f"{np.mean([peer[k] for k in seeds]):.3f} steps; ratio",
+                [ours[k] / peer[k] for k in seeds],
+                1.0,
+                "benchmarks/bench_peers.py",
             )
         )
     return out
