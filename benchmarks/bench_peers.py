@@ -28,7 +28,8 @@ environment steps have been trained on, and at the end: the row's ``curve``, and
 the steps it took to come within 5% of the reference (``steps_to_5pct``; ``None``: never
 within the run). The evaluations' time is not counted in the training time.
 
-Results go to ``--out`` as JSON lines as they come (a rerun skips the rows already there);
+Results go to ``--out`` as JSON lines as they come (a rerun skips the rows already there,
+and with ``--curve-every`` only those with a curve; the last row of a run is the one read);
 the table printed at the end gives per scenario, learner and variant the median over
 seeds of greedy steps ÷ the reference, the capture rate, collisions a game, and the
 training wall time (``--jobs`` runs at once on this machine).
@@ -168,6 +169,16 @@ def run_one(job: dict) -> dict:
     return row
 
 
+def _key(row: dict) -> tuple:
+    return row["scenario"], row["algo"], row["variant"], row["seed"], row["steps"]
+
+
+def latest(rows: list[dict]) -> list[dict]:
+    """One row per scenario, learner, variant, seed and steps: the last one written (a run
+    traced anew with ``--curve-every`` replaces the row it traces)."""
+    return list({_key(r): r for r in rows}.values())
+
+
 def reference_steps(scenario: str, episodes: int) -> float:
     """The reference's capture steps: the exact optimum on grids (over the start
     distribution), else ``pursuit`` played on ``episodes`` games (seed 1000)."""
@@ -257,7 +268,8 @@ def main() -> None:
     p.add_argument("--curve-episodes", type=int, default=500)
     args = p.parse_args()
     rows = [json.loads(x) for x in args.out.read_text().splitlines()] if args.out.exists() else []
-    done = {(r["scenario"], r["algo"], r["variant"], r["seed"], r["steps"]) for r in rows}
+    rows = latest(rows)
+    done = {_key(r) for r in rows if not args.curve_every or "curve" in r}  # else traced anew
     jobs = [
         {"scenario": s, "algo": a, "variant": v, "seed": seed, "steps": args.steps,
          "episodes": args.episodes, "curve_every": args.curve_every,
@@ -274,6 +286,7 @@ def main() -> None:
             with args.out.open("a") as fh:
                 fh.write(json.dumps(row) + "\n")
             rows.append(row)
+    rows = latest(rows)
     print(table(rows))
     if args.figure is not None:
         figure(rows, args.figure)
