@@ -42,6 +42,7 @@ import numpy as np
 import torch
 
 from ..algos import ActorCritic
+from ..algos.optimizer import set_learning_rate
 from ..config import ConfigError, Scenario, Train
 from ..solve.tables import joint_observations, model_table, uniform_table
 from ..solve.transitions import TooLargeError, UnsupportedError
@@ -112,12 +113,9 @@ class ExploitabilityDescent:
         ``progress`` (the run's fraction done) through it setting the step size under a
         linear ``descent_schedule``; the metrics to log."""
         if self.schedule == "linear":
-            optimizers = [self.optimizer]
+            set_learning_rate(self.optimizer, self.lr * (1.0 - progress))
             if self.evader is not None:
-                optimizers.append(self.evader_optimizer)
-            for optimizer in optimizers:
-                for group in optimizer.param_groups:
-                    group["lr"] = self.lr * (1.0 - progress)
+                set_learning_rate(self.evader_optimizer, self.lr * (1.0 - progress))
         table = model_table(self.scenario, self.model, self.scenario.pursuers)
         value = self.last_value = self.gradient.refresh(table)
         rows, visits = self.gradient.visits(self.rng)

@@ -106,11 +106,11 @@ def recurrent_claims(rows: list[dict[str, Any]]) -> list[Claim]:
     out = []
     for (scenario, budget, algo, memory), recurrent in sorted(steps.items()):
         memoryless = steps.get((scenario, budget, algo, "none"))
+        if memory == "none" or not memoryless:
+            continue
         scope = f"{scenario}, {algo.upper()}"
         if len(trained[scenario]) > 1:
             scope += f", {budget:,} steps"
-        if memory == "none" or not memoryless:
-            continue
         ratio = ratio_interval(recurrent, memoryless)
         out.append(
             Claim(
