@@ -71,6 +71,7 @@ def shorten(argv: list[str], run_dir: Path, tmp: Path) -> list[str]:
         rest += ["--sequential", "--logdir", str(tmp / "sweep"), "--set", "train.updates=2"]
     elif name == "experiments":
         rest += [] if "--dry-run" in rest else ["--dry-run"]
+        rest += ["--estimate-updates", "1"]  # one timed update per cell type, not 20
         rest += ["--logdir", str(tmp / "report-runs"), "--out", str(tmp / "report")]
         if "--quote-in" in rest:  # documents of the temporary folder's own
             i = rest.index("--quote-in") + 1
