@@ -38,9 +38,11 @@ RUNS = {
     "phys-a2c": ("phys_cont", {"algo": "a2c", "layers": 2}),
     "grid-vs-a2cm": ("grid_vs", {"algo": "a2cm", "encoding": "onehot"}),
     "diff-a2cm": ("phys_diff", {"algo": "a2cm"}),
+    "phys-a2cm-relative": ("phys_cont_random", {"algo": "a2cm", "encoding": "relative"}),
+    "grid-vs-a2c-relative": ("grid_vs", {"algo": "a2c", "encoding": "relative"}),
 }
 """Tiny runs: both learners, both control types, one-hot cells, deeper actors, a learned
-evader, differential drive."""
+evader, differential drive, relative inputs (folded into the first layers)."""
 
 
 def train(path: Path, scenario_name: str, values: dict) -> Path:
@@ -185,7 +187,10 @@ def test_policy_json_round_trips_and_names_what_a_user_needs(exported) -> None:
     assert velocities[-2:] == (
         ["evader.x", "evader.y"] if scenario.mode == "grid" else ["evader.vx", "evader.vy"]
     )
-    assert obs["encoding"]["kind"] == ("onehot" if trained.pursuers.encoding else "xy")
+    relative = trained.pursuers.relative is not None
+    assert obs["encoding"]["kind"] == (
+        "onehot" if trained.pursuers.encoding else "relative" if relative else "xy"
+    )
     actions = policy["actions"]
     if scenario.differential:  # (forward, turn), and the headings after the velocities
         assert actions["drive"] == "differential" and team.clip is clip_to_box

@@ -15,7 +15,7 @@ import torch
 from ..envs.core import REWARD_PARTS
 from ..envs.sensing import team_dim
 from .distributions import ActionDistribution, CategoricalActions, GaussianActions
-from .encoding import OneHotCells
+from .encoding import OneHotCells, RelativePositions
 from .models import ActorCritic, SensedInputs
 from .recurrent import RecurrentActorCritic
 
@@ -75,5 +75,14 @@ def make_model(
         layers=train_cfg.layers,
         encoding=OneHotCells(scenario.size) if train_cfg.encoding == "onehot" else None,
         sensed=sensed,
+        relative=relative_positions(scenario, agents) if train_cfg.encoding == "relative" else None,
     )
     return model.to(train_cfg.device)
+
+
+def relative_positions(scenario: Scenario, agents: int) -> RelativePositions:
+    """Each of a team's ``agents`` actors' view from its own body: the pursuers' (the
+    first bodies), or a team of one in a scenario with a learned evader, that evader's."""
+    evader = agents == 1 and scenario.evader == "learned"
+    first = scenario.pursuers if evader else 0
+    return RelativePositions(scenario.pursuers + 1, scenario.state_dim, first, agents)

@@ -1,4 +1,5 @@
-"""How a network sees an observation: the raw vector, or :class:`OneHotCells` on grids."""
+"""How a network sees an observation: the raw vector, :class:`OneHotCells` on grids, or
+:class:`RelativePositions` (each actor's own view)."""
 
 from __future__ import annotations
 
@@ -33,3 +34,46 @@ class OneHotCells:
         cells = np.rint(np.asarray(obs, dtype=np.float32) * (self.size - 1)).astype(np.intp)
         np.clip(cells, 0, self.size - 1, out=cells)
         return self._eye[cells].reshape(*cells.shape[:-1], -1)
+
+
+class RelativePositions:
+    """Each actor's own view of the global observation: every other body's position as its
+    offset from the actor's body, the actor's own position and everything else (velocities,
+    headings) as they are, ``(..., d) → (..., n, d)``. The offsets are the numbers a
+    pursuit rule reads, so a network need not learn to subtract coordinates, and they are
+    the same wherever in the arena a configuration occurs (random starts).
+
+    The map is linear, ``x_i = M_i x``: :attr:`matrices` ``(n, d, d)`` hold the ``M_i``
+    (an export folds them into each actor's first layer, ``W M_i``).
+
+    Args:
+        bodies: bodies in the observation (the pursuers and the evader), whose positions
+            are its first ``2 · bodies`` entries (x, y each).
+        obs_dim: length of the observation.
+        first: the body of the first actor; actor ``j`` is body ``first + j``.
+        n: how many actors.
+    """
+
+    def __init__(self, bodies: int, obs_dim: int, first: int, n: int) -> None:
+        if first < 0 or first + n > bodies or 2 * bodies > obs_dim:
+            raise ValueError(
+                f"relative positions of actors {first}…{first + n - 1} need them among"
+                f" {bodies} bodies whose positions fit in {obs_dim} entries"
+            )
+        m = np.tile(np.eye(obs_dim, dtype=np.float32), (n, 1, 1))
+        for j in range(n):
+            own = first + j
+            for body in range(bodies):
+                if body != own:
+                    for c in range(2):  # x_body - x_own, y_body - y_own
+                        m[j, 2 * body + c, 2 * own + c] = -1.0
+        self.matrices = m
+        self._torch = torch.from_numpy(m)
+
+    def torch(self, obs: torch.Tensor) -> torch.Tensor:
+        """Each actor's input ``(..., n, d)`` of observations ``(..., d)``."""
+        return torch.einsum("nij,...j->...ni", self._torch.to(obs), obs)
+
+    def numpy(self, obs: np.ndarray) -> np.ndarray:
+        """:meth:`torch` in numpy (float32)."""
+        return np.einsum("nij,...j->...ni", self.matrices, np.asarray(obs, dtype=np.float32))

@@ -9,7 +9,9 @@ dimension, so all of them are evaluated in one batched op, not a Python loop.
 
 Two options go beyond the paper (``Train.layers``, ``Train.encoding``): more hidden layers
 of the same width, and, on grids, the input as one one-hot of each coordinate's cell
-(:class:`~a2cm_phys.algos.encoding.OneHotCells`) instead of the coordinates themselves.
+(:class:`~a2cm_phys.algos.encoding.OneHotCells`) instead of the coordinates themselves, or
+each actor's input seen from its own body, the others' positions as offsets
+(:class:`~a2cm_phys.algos.encoding.RelativePositions`, ``encoding = "relative"``).
 With the defaults (one layer, the raw observation) the networks are the paper's, weight for
 weight.
 
@@ -46,7 +48,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .distributions import ActionDistribution, CategoricalActions
-from .encoding import OneHotCells
+from .encoding import OneHotCells, RelativePositions
 from .layers import StackedLinear, stacked_mlp
 from .snapshot import ActorSnapshot
 
@@ -112,6 +114,8 @@ class ActorCritic(nn.Module):
         layers: hidden layers of every actor and critic (the paper's: 1).
         encoding: the networks' input: the observation itself, or :class:`OneHotCells`.
         sensed: with sensing, where the agents' observations and the state lie in the input.
+        relative: each actor reads the observation from its own body
+            (:class:`RelativePositions`; the critics read it as it is).
         critic_memory: numbers each critic reads beside its input (a recurrent A2C critic:
             its actor's memory, :mod:`~a2cm_phys.algos.recurrent`).
     """
@@ -134,6 +138,7 @@ class ActorCritic(nn.Module):
         encoding: OneHotCells | None = None,
         sensed: SensedInputs | None = None,
         critic_memory: int = 0,
+        relative: RelativePositions | None = None,
     ) -> None:
         super().__init__()
         if layers < 1:
@@ -142,7 +147,7 @@ class ActorCritic(nn.Module):
         self.dist = dist
         self.obs_dim, self.n_agents, self.hidden = obs_dim, n_agents, hidden
         self.shared_critic, self.n_values = shared_critic, n_values
-        self.encoding, self.sensed = encoding, sensed
+        self.encoding, self.sensed, self.relative = encoding, sensed, relative
         c = critics(n_agents, shared_critic)
         inputs, critic_inputs = _input_sizes(obs_dim, encoding, sensed, shared_critic)
         critic_inputs += critic_memory
@@ -188,6 +193,8 @@ class ActorCritic(nn.Module):
     def actor_outputs(self, obs: torch.Tensor) -> torch.Tensor:
         """Actor outputs ``(..., N, n_outputs)`` (logits or means) for ``(..., obs_dim)``."""
         x, own = input_view(self.sensed, obs, self.n_agents)
+        if self.relative is not None:
+            x, own = self.relative.torch(x), True
         return agent_mlp(self.actor_hidden, self.actor_deep, self.actor_out, self._input(x), own)
 
     def value(self, obs: torch.Tensor) -> torch.Tensor:
@@ -222,6 +229,8 @@ class ActorCritic(nn.Module):
         x = input_view(self.sensed, np.asarray(obs, dtype=np.float32), self.n_agents)[0]
         if self.encoding is not None:
             x = self.encoding.numpy(x)
+        if self.relative is not None:
+            x = self.relative.numpy(x)
         return self._numpy_actors.outputs(x)
 
     def action_probs_np(self, obs: np.ndarray) -> np.ndarray:
@@ -244,7 +253,7 @@ class ActorCritic(nn.Module):
 
     def _snapshot(self) -> ActorSnapshot:
         parts = (self.actor_hidden, self.actor_out, self.actor_deep, self.log_std)
-        return ActorSnapshot(*parts, per_agent=self.sensed is not None)
+        return ActorSnapshot(*parts, per_agent=self.sensed is not None or self.relative is not None)
 
 
 def agent_mlp(first: StackedLinear, deep, last: StackedLinear, x: torch.Tensor, own: bool):

@@ -265,6 +265,13 @@ def _check_descent(scenario: Scenario, cfg: Train) -> None:
             "training options: key 'encoding': one-hot cells need a grid, and scenario"
             f" '{scenario.name}' is in {scenario.mode} mode (use encoding = 'xy')"
         )
+    if cfg.encoding == "relative" and (scenario.sensing.on or cfg.recurrent != "none"):
+        what = "sensing" if scenario.sensing.on else f"recurrent = '{cfg.recurrent}'"
+        raise ConfigError(
+            "training options: key 'encoding': relative inputs are made from the global"
+            f" observation of memoryless actors, and this run has {what} (use encoding ="
+            " 'xy')"
+        )
 
 
 MAX_WEIGHTS = 100_000_000

@@ -11,7 +11,7 @@ from .parse import ConfigError, InvalidKey, check_limits
 Algo = Literal["a2c", "a2cm"]
 Optimizer = Literal["rmsprop", "adam"]
 Schedule = Literal["constant", "linear"]
-Encoding = Literal["xy", "onehot"]
+Encoding = Literal["xy", "onehot", "relative"]
 DescentTeams = Literal["pursuers", "both"]
 Recurrent = Literal["none", "gru"]
 
@@ -51,7 +51,9 @@ class Train:
     value_coef: float = 0.5
     hidden: int = 128
     layers: int = 1  # hidden layers of every actor and critic (the paper's: 1)
-    encoding: Encoding = "xy"  # the networks' input: the observation, or one-hot cells (grid)
+    # the networks' input: the observation, one-hot cells (grid), or "relative": each actor's
+    # from its own body, the others' positions as offsets (algos/encoding.py)
+    encoding: Encoding = "xy"
     # "gru": each actor carries a GRU state across an episode (algos/recurrent.py), learnt by
     # back-propagation through each rollout (batch_size / num_envs steps)
     recurrent: Recurrent = "none"

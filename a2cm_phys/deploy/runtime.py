@@ -172,8 +172,9 @@ class Team:
         self.clip = pursuer_clip(policy)
         """How the pursuers' continuous commands are limited (the evader's: its actor's)."""
         kind = policy["observation"]["encoding"]["kind"]
-        self.encoding: str | None = None if kind == "xy" else kind
-        """``None`` when the actors read the observation itself; ``"onehot"`` when they
+        self.encoding: str | None = None if kind in ("xy", "relative") else kind
+        """``None`` when the actors read the observation itself (relative inputs are folded
+        into their first layers); ``"onehot"`` when they
         read one-hot cells (then they know one arena size only)."""
         size = policy["observation"]["size"]
         for agent, actor in self.actors.items():

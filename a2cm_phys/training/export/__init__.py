@@ -46,12 +46,17 @@ class Exported:
 
 def actor_weights(model: ActorCritic, agent: int) -> ActorWeights:
     """Agent ``agent``'s actor of ``model`` as numpy float32 (first layer, deeper hidden
-    layers, output layer; ``log_std`` for a Gaussian)."""
+    layers, output layer; ``log_std`` for a Gaussian). Relative inputs are folded into the
+    first layer (``W M``, :class:`~a2cm_phys.algos.encoding.RelativePositions`): the
+    exported actor reads the global observation."""
     stack = [model.actor_hidden, *model.actor_deep, model.actor_out]
     layers = [
         (layer.weight[agent].detach().cpu().numpy(), layer.bias[agent].detach().cpu().numpy())
         for layer in stack
     ]
+    if model.relative is not None:
+        weight, bias = layers[0]
+        layers[0] = (weight @ model.relative.matrices[agent], bias)
     log_std = None if model.log_std is None else model.log_std[agent].detach().cpu().numpy()
     return ActorWeights(layers, log_std)
 

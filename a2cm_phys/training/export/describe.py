@@ -46,6 +46,12 @@ def observation_section(scenario: Scenario, encoding: str) -> dict[str, Any]:
             "rule": "inside the graph: each entry x becomes a one-hot vector of size cells at"
             " clip(round(x * (size - 1)), 0, size - 1) (round half to even)",
         }
+    elif encoding == "relative":
+        encoded = {
+            "kind": "relative",
+            "rule": "none in the graph: trained on each actor's view from its own body (the"
+            " others' positions minus its own), a linear map folded into its first layer",
+        }
     else:
         encoded = {"kind": "xy", "rule": "none: the network reads the observation itself"}
     return {
