@@ -77,3 +77,7 @@ class RelativePositions:
     def numpy(self, obs: np.ndarray) -> np.ndarray:
         """:meth:`torch` in numpy (float32)."""
         return np.einsum("nij,...j->...ni", self.matrices, np.asarray(obs, dtype=np.float32))
+
+    def view(self, obs):
+        """:meth:`torch` of a tensor, :meth:`numpy` of anything else."""
+        return self.torch(obs) if isinstance(obs, torch.Tensor) else self.numpy(obs)

@@ -76,10 +76,19 @@ class SensedInputs:
         return x[..., start : start + n * self.obs_dim].reshape(*x.shape[:-1], n, self.obs_dim)
 
 
-def input_view(sensed: SensedInputs | None, obs, n: int, state: bool = False):
+def input_view(
+    sensed: SensedInputs | None,
+    obs,
+    n: int,
+    state: bool = False,
+    relative: RelativePositions | None = None,
+):
     """What a team's networks read of ``obs``, and whether one row per agent: the whole
-    vector (sensing off), the global state (``state``: A2CM's critic), or each agent's own."""
+    vector (sensing off), the global state (``state``: A2CM's critic), or each agent's own
+    (with sensing, or each actor's ``relative`` view; torch or numpy as ``obs`` is)."""
     if sensed is None:
+        if relative is not None and not state:
+            return relative.view(obs), True
         return obs, False
     if state:
         return obs[..., : sensed.state_dim], False
@@ -114,8 +123,7 @@ class ActorCritic(nn.Module):
         layers: hidden layers of every actor and critic (the paper's: 1).
         encoding: the networks' input: the observation itself, or :class:`OneHotCells`.
         sensed: with sensing, where the agents' observations and the state lie in the input.
-        relative: each actor reads the observation from its own body
-            (:class:`RelativePositions`; the critics read it as it is).
+        relative: each actor's view from its own body (:class:`RelativePositions`).
         critic_memory: numbers each critic reads beside its input (a recurrent A2C critic:
             its actor's memory, :mod:`~a2cm_phys.algos.recurrent`).
     """
@@ -192,9 +200,7 @@ class ActorCritic(nn.Module):
 
     def actor_outputs(self, obs: torch.Tensor) -> torch.Tensor:
         """Actor outputs ``(..., N, n_outputs)`` (logits or means) for ``(..., obs_dim)``."""
-        x, own = input_view(self.sensed, obs, self.n_agents)
-        if self.relative is not None:
-            x, own = self.relative.torch(x), True
+        x, own = input_view(self.sensed, obs, self.n_agents, relative=self.relative)
         return agent_mlp(self.actor_hidden, self.actor_deep, self.actor_out, self._input(x), own)
 
     def value(self, obs: torch.Tensor) -> torch.Tensor:
@@ -212,8 +218,7 @@ class ActorCritic(nn.Module):
         """Actions ``(B, N, *action_shape)`` (``(N, ...)`` for a 1-D ``obs``) of observations
         ``(B, obs_dim)`` for rollouts (no autograd): int64 for discrete actions, float32
         (unclipped) for continuous ones. ``rng`` is the only randomness (unused when
-        ``greedy``: the argmax, or the Gaussian's mean), so a seeded one gives a bit-exact run.
-        """
+        ``greedy``: the argmax, or the Gaussian's mean): a seeded one gives a bit-exact run."""
         out = self.outputs_np(obs)
         if greedy:
             return self.dist.greedy(out)
@@ -226,11 +231,10 @@ class ActorCritic(nn.Module):
 
     def outputs_np(self, obs: np.ndarray) -> np.ndarray:
         """Actor outputs as numpy ``(B, N, n_outputs)`` (``(N, n_outputs)`` for 1-D ``obs``)."""
-        x = input_view(self.sensed, np.asarray(obs, dtype=np.float32), self.n_agents)[0]
+        obs = np.asarray(obs, dtype=np.float32)
+        x = input_view(self.sensed, obs, self.n_agents, relative=self.relative)[0]
         if self.encoding is not None:
             x = self.encoding.numpy(x)
-        if self.relative is not None:
-            x = self.relative.numpy(x)
         return self._numpy_actors.outputs(x)
 
     def action_probs_np(self, obs: np.ndarray) -> np.ndarray:
