@@ -223,8 +223,26 @@ def check_train(scenario: Scenario, cfg: Train) -> None:
             " (use grid_vs, phys_vs or phys_cont_vs, or pool_every = 0)"
         )
     _check_descent(scenario, cfg)
+    _check_encoding(scenario, cfg)
     _check_recurrent(cfg)
     check_network_size(scenario, cfg)
+
+
+def _check_encoding(scenario: Scenario, cfg: Train) -> None:
+    """One-hot inputs need a grid; relative inputs the global observation of memoryless
+    actors."""
+    if cfg.encoding == "onehot" and scenario.mode != "grid":
+        raise ConfigError(
+            "training options: key 'encoding': one-hot cells need a grid, and scenario"
+            f" '{scenario.name}' is in {scenario.mode} mode (use encoding = 'xy')"
+        )
+    if cfg.encoding == "relative" and (scenario.sensing.on or cfg.recurrent != "none"):
+        what = "sensing" if scenario.sensing.on else f"recurrent = '{cfg.recurrent}'"
+        raise ConfigError(
+            "training options: key 'encoding': relative inputs are made from the global"
+            f" observation of memoryless actors, and this run has {what} (use encoding ="
+            " 'xy')"
+        )
 
 
 def _check_recurrent(cfg: Train) -> None:
@@ -242,7 +260,7 @@ def _check_recurrent(cfg: Train) -> None:
 
 
 def _check_descent(scenario: Scenario, cfg: Train) -> None:
-    """Exploitability descent needs grid self-play, and one-hot inputs a grid."""
+    """Exploitability descent needs grid self-play."""
     if cfg.descent_teams == "both" and not cfg.descent_every:
         raise ConfigError(
             "training options: key 'descent_teams': 'both' needs exploitability descent"
@@ -259,18 +277,6 @@ def _check_descent(scenario: Scenario, cfg: Train) -> None:
             "training options: key 'descent_teams': with collisions.mode = 'terminate' the"
             " pursuers' best response could end the episode by colliding, so the evader has"
             " no worst case to raise (use descent_teams = 'pursuers')"
-        )
-    if cfg.encoding == "onehot" and scenario.mode != "grid":
-        raise ConfigError(
-            "training options: key 'encoding': one-hot cells need a grid, and scenario"
-            f" '{scenario.name}' is in {scenario.mode} mode (use encoding = 'xy')"
-        )
-    if cfg.encoding == "relative" and (scenario.sensing.on or cfg.recurrent != "none"):
-        what = "sensing" if scenario.sensing.on else f"recurrent = '{cfg.recurrent}'"
-        raise ConfigError(
-            "training options: key 'encoding': relative inputs are made from the global"
-            f" observation of memoryless actors, and this run has {what} (use encoding ="
-            " 'xy')"
         )
 
 
