@@ -18,7 +18,7 @@ from a2cm_phys.algos.layers import StackedLinear
 from a2cm_phys.algos.learner import Learner
 from a2cm_phys.algos.losses import NonFiniteLoss
 from a2cm_phys.algos.models import ActorCritic
-from a2cm_phys.config import Train, load_scenario, load_train, preset, resolve_train
+from a2cm_phys.config import ConfigError, Train, load_scenario, load_train, preset, resolve_train
 from a2cm_phys.training.rollout import allocate_batch
 
 torch.set_num_threads(1)
@@ -484,15 +484,45 @@ def test_non_finite_rewards_change_nothing_under_our_settings() -> None:
     assert all(torch.equal(norm[k], after[k]) for k in norm)
 
 
-def test_mean_bound_loss_by_hand():
-    from a2cm_phys.algos.losses import MEAN_BOUND, mean_bound_loss
+@pytest.mark.parametrize("b", [Train().mean_bound, 3.0])
+def test_mean_bound_loss_by_hand(b):
+    from a2cm_phys.algos.losses import mean_bound_loss
 
-    b = MEAN_BOUND
     means = torch.tensor([[[[0.5, b + 0.2]], [[-b - 0.5, 0.0]]]])  # (T=1, B=2, N=1, dim=2)
     # per agent: the batch mean of the per-dimension squared overshoots, summed
     expected = ((0.2**2) + (0.5**2)) / 2
-    assert mean_bound_loss(means).item() == pytest.approx(expected, rel=1e-5)
-    assert mean_bound_loss(torch.zeros(3, 2, 4, 2)).item() == 0.0
+    assert mean_bound_loss(means, b).item() == pytest.approx(expected, rel=1e-5)
+    assert mean_bound_loss(torch.zeros(3, 2, 4, 2), b).item() == 0.0
+    inside = torch.full((1, 1, 1, 2), b - 0.05)  # within this bound, past the default's
+    assert mean_bound_loss(inside, b).item() == 0.0
+
+
+def test_the_learner_bounds_the_means_where_mean_bound_says() -> None:
+    """``Train.mean_bound`` is where the learner's soft bound starts: two learners that
+    differ only in it differ in their loss by exactly the bound's term at the model's
+    means (2.0 here: past the default 1.1, inside 3.0, where the term is 0)."""
+    from a2cm_phys.algos.losses import mean_bound_loss
+
+    batch = random_batch()
+    batch["actions"] = torch.zeros(16, 2, N, 2)
+    losses = {}
+    for bound in (Train().mean_bound, 3.0):
+        m = gaussian_model("a2cm")
+        with torch.no_grad():
+            m.actor_out.weight.zero_()
+            m.actor_out.bias.fill_(2.0)
+        cfg = paper_cfg(mean_bound_coef=1.0, mean_bound=bound)
+        losses[bound] = Learner(m, cfg).update(batch)["loss"]
+    means = torch.full((16, 2, N, 2), 2.0)
+    gap = mean_bound_loss(means, Train().mean_bound).item()
+    assert gap == pytest.approx(N * 2 * 0.9**2)
+    assert losses[Train().mean_bound] - losses[3.0] == pytest.approx(gap, rel=1e-5)
+
+
+def test_mean_bound_must_be_positive_and_finite() -> None:
+    for bad in (0.0, -1.0, float("inf")):
+        with pytest.raises(ConfigError, match="training options: key 'mean_bound': must be"):
+            load_train({"mean_bound": bad})
 
 
 def test_mean_bound_pulls_runaway_gaussian_means_back():
@@ -501,6 +531,6 @@ def test_mean_bound_pulls_runaway_gaussian_means_back():
     from a2cm_phys.algos.losses import mean_bound_loss
 
     out = torch.tensor([[[[3.0, 0.5]]]], requires_grad=True)
-    mean_bound_loss(out).backward()
+    mean_bound_loss(out, Train().mean_bound).backward()
     assert out.grad[0, 0, 0, 0] > 0  # descent lowers the runaway mean
     assert out.grad[0, 0, 0, 1] == 0

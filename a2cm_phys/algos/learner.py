@@ -143,6 +143,7 @@ class Learner:
             entropy_coef=entropy_coef(self.entropy_coef, cfg.entropy_schedule, progress),
             value_coef=cfg.value_coef,
             mean_bound_coef=cfg.mean_bound_coef,
+            mean_bound=cfg.mean_bound,
         )
         metrics = loss_metrics(losses, adv, model.n_agents)
         if cfg.constrain_collisions:

@@ -16,13 +16,10 @@ import torch
 if TYPE_CHECKING:
     from .models import ActorCritic
 
-MEAN_BOUND = 1.1
-"""Where the soft bound on Gaussian means starts: a little past the command box's ±1, so a
-mean can still command full speed along an axis."""
 
-
-def mean_bound_loss(means: torch.Tensor) -> torch.Tensor:
-    """``Σ_agents,dims mean_batch [relu(μ − b)² + relu(−μ − b)²]`` with ``b = MEAN_BOUND``.
+def mean_bound_loss(means: torch.Tensor, bound: float) -> torch.Tensor:
+    """``Σ_agents,dims mean_batch [relu(μ − b)² + relu(−μ − b)²]`` with ``b = bound``
+    (``Train.mean_bound``).
 
     A Gaussian actor's unbounded mean drifts past the env's clip under the optimiser's
     noise; there every sample is clipped to the same command and the gradient carries no
@@ -31,7 +28,7 @@ def mean_bound_loss(means: torch.Tensor) -> torch.Tensor:
     without squashing, so log-probabilities stay those of the plain Gaussian.
     ``means``: ``(T, B, N, dim)``.
     """
-    over = (means - MEAN_BOUND).clamp(min=0) ** 2 + (means + MEAN_BOUND).clamp(max=0) ** 2
+    over = (means - bound).clamp(min=0) ** 2 + (means + bound).clamp(max=0) ** 2
     return over.mean(dim=(0, 1)).sum()
 
 
@@ -70,6 +67,7 @@ def a2c_losses(
     entropy_coef: float,
     value_coef: float,
     mean_bound_coef: float | None,
+    mean_bound: float,
 ) -> Losses:
     """The loss of a batch, with gradient.
 
@@ -83,6 +81,7 @@ def a2c_losses(
         entropy_coef: the entropy bonus's weight now.
         value_coef: the value loss's weight.
         mean_bound_coef: the weight of :func:`mean_bound_loss` for Gaussian actors (0: off).
+        mean_bound: where that bound starts.
     """
     out = critic(obs)  # (T, B, C, K), with gradient
     dist_out = model.actor_outputs(obs)
@@ -97,7 +96,7 @@ def a2c_losses(
     value_loss = (targets - out).pow(2).mean(dim=(0, 1)).sum()
     loss = policy_loss - entropy_coef * entropy_sum + value_coef * value_loss
     if model.log_std is not None and mean_bound_coef:
-        loss = loss + mean_bound_coef * mean_bound_loss(dist_out)
+        loss = loss + mean_bound_coef * mean_bound_loss(dist_out, mean_bound)
     return Losses(policy_loss, value_loss, entropy_sum, loss)
 
 

@@ -79,6 +79,9 @@ class Train:
     # distance to the evader and on the area of the evader's Voronoi cell (algos/shaping.py).
     log_std_init: float | None = None
     mean_bound_coef: float | None = None
+    # where that bound starts: a little past the command box's ±1, so that a mean can still
+    # command full speed along an axis (larger: BENCHMARKS.md, "the soft bound")
+    mean_bound: float = 1.1
     distance_shaping: float | None = None
     area_shaping: float | None = None
     constrain_collisions: bool = False  # collisions as a constraint (Lagrange multiplier)
@@ -140,6 +143,8 @@ class Train:
             value = getattr(self, key)
             if value is not None and not 0.0 <= value < float("inf"):
                 raise InvalidKey(key, f"must be finite and >= 0, got {value}")
+        if not 0.0 < self.mean_bound < float("inf"):
+            raise InvalidKey("mean_bound", f"must be finite and > 0, got {self.mean_bound}")
         if self.log_std_init is not None and not math.isfinite(self.log_std_init):
             raise InvalidKey("log_std_init", f"must be finite, got {self.log_std_init}")
         if self.pool_every < 0:
