@@ -80,7 +80,7 @@ class Train:
     log_std_init: float | None = None
     mean_bound_coef: float | None = None
     # where that bound starts: a little past the command box's ±1, so that a mean can still
-    # command full speed along an axis (larger: BENCHMARKS.md, "the soft bound")
+    # command full speed along an axis (3 is faster: docs/benchmarks/random-starts.md)
     mean_bound: float = 1.1
     distance_shaping: float | None = None
     area_shaping: float | None = None
