@@ -92,8 +92,7 @@ class Learner:
         train_cfg: Train,
         shaping: Callable[[Mapping[str, Any]], np.ndarray] | None = None,
     ) -> None:
-        self.model = model
-        self.cfg = train_cfg
+        self.model, self.cfg = model, train_cfg
         self.entropy_coef = train_cfg.entropy_coef
         self.shaping = shaping
         self.optimizer = make_optimizer(model, train_cfg)
