@@ -493,7 +493,7 @@ def test_mean_bound_loss_by_hand(b):
     expected = ((0.2**2) + (0.5**2)) / 2
     assert mean_bound_loss(means, b).item() == pytest.approx(expected, rel=1e-5)
     assert mean_bound_loss(torch.zeros(3, 2, 4, 2), b).item() == 0.0
-    inside = torch.full((1, 1, 1, 2), b - 0.05)  # within this bound, past the default's
+    inside = torch.full((1, 1, 1, 2), b - 0.05)  # just inside the bound: free
     assert mean_bound_loss(inside, b).item() == 0.0
 
 
