@@ -80,8 +80,7 @@ PIECES: dict[str, dict[str, Any]] = {
     "ls0": {"log_std_init": 0.0},
     "ls-.5": {"log_std_init": -0.5},
     "ls-1": {"log_std_init": -1.0},
-    "mb2": {"mean_bound": 2.0},  # the soft bound on Gaussian means from ±2, not ±1.1
-    "mb3": {"mean_bound": 3.0},
+    "mb3": {"mean_bound": 3.0},  # the soft bound on Gaussian means from ±3, not ±1.1
     "lagrange": {"value_norm": True, "split_rewards": True, "constrain_collisions": True},
     # the collision constraint with a budget (collisions per step, in training)
     "lag2e-4": {"constrain_collisions": True, "collision_budget": 2e-4},
