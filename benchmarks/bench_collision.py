@@ -68,6 +68,7 @@ PIECES: dict[str, dict[str, Any]] = {
     "gru": {"recurrent": "gru"},  # recurrent actors (issue 33)
     "onehot": {"encoding": "onehot"},
     "rel": {"encoding": "relative"},  # each actor sees the others from its own body
+    "metric": {"encoding": "metric"},  # the same, the offsets in metres (cells)
     "l2": {"layers": 2},
     "n16": {"batch_size": 256},  # 16-step rollouts (16 games)
     "n32": {"batch_size": 512},  # 32-step rollouts

@@ -40,9 +40,10 @@ RUNS = {
     "diff-a2cm": ("phys_diff", {"algo": "a2cm"}),
     "phys-a2cm-relative": ("phys_cont_random", {"algo": "a2cm", "encoding": "relative"}),
     "grid-vs-a2c-relative": ("grid_vs", {"algo": "a2c", "encoding": "relative"}),
+    "phys-a2cm-metric": ("phys_cont10_random", {"algo": "a2cm", "encoding": "metric"}),
 }
 """Tiny runs: both learners, both control types, one-hot cells, deeper actors, a learned
-evader, differential drive, relative inputs (folded into the first layers)."""
+evader, differential drive, relative and metric inputs (folded into the first layers)."""
 
 
 def train(path: Path, scenario_name: str, values: dict) -> Path:
@@ -187,10 +188,14 @@ def test_policy_json_round_trips_and_names_what_a_user_needs(exported) -> None:
     assert velocities[-2:] == (
         ["evader.x", "evader.y"] if scenario.mode == "grid" else ["evader.vx", "evader.vy"]
     )
-    relative = trained.pursuers.relative is not None
+    relative = trained.pursuers.relative
+    kind = "relative" if relative is not None and relative.scale == 1.0 else "metric"
     assert obs["encoding"]["kind"] == (
-        "onehot" if trained.pursuers.encoding else "relative" if relative else "xy"
+        "onehot" if trained.pursuers.encoding else "xy" if relative is None else kind
     )
+    assert team.arena_bound == trained.pursuers.arena_bound
+    if kind == "metric" and relative is not None:
+        assert obs["encoding"]["scale"] == relative.scale == scenario.size
     actions = policy["actions"]
     if scenario.differential:  # (forward, turn), and the headings after the velocities
         assert actions["drive"] == "differential" and team.clip is clip_to_box

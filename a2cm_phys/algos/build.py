@@ -75,14 +75,21 @@ def make_model(
         layers=train_cfg.layers,
         encoding=OneHotCells(scenario.size) if train_cfg.encoding == "onehot" else None,
         sensed=sensed,
-        relative=relative_positions(scenario, agents) if train_cfg.encoding == "relative" else None,
+        relative=relative_positions(scenario, agents, train_cfg.encoding),
     )
     return model.to(train_cfg.device)
 
 
-def relative_positions(scenario: Scenario, agents: int) -> RelativePositions:
+def relative_positions(
+    scenario: Scenario, agents: int, encoding: str = "relative"
+) -> RelativePositions | None:
     """Each of a team's ``agents`` actors' view from its own body: the pursuers' (the
-    first bodies), or a team of one in a scenario with a learned evader, that evader's."""
+    first bodies), or a team of one in a scenario with a learned evader, that evader's;
+    with ``encoding = "metric"`` the offsets in metres or cells
+    (:attr:`~a2cm_phys.config.Scenario.position_unit`); ``None`` for any other encoding."""
+    if encoding not in ("relative", "metric"):
+        return None
     evader = agents == 1 and scenario.evader == "learned"
     first = scenario.pursuers if evader else 0
-    return RelativePositions(scenario.pursuers + 1, scenario.state_dim, first, agents)
+    scale = scenario.position_unit if encoding == "metric" else 1.0
+    return RelativePositions(scenario.pursuers + 1, scenario.state_dim, first, agents, scale)

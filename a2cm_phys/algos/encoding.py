@@ -38,10 +38,14 @@ class OneHotCells:
 
 class RelativePositions:
     """Each actor's own view of the global observation: every other body's position as its
-    offset from the actor's body, the actor's own position and everything else (velocities,
-    headings) as they are, ``(..., d) → (..., n, d)``. The offsets are the numbers a
-    pursuit rule reads, so a network need not learn to subtract coordinates, and they are
-    the same wherever in the arena a configuration occurs (random starts).
+    offset from the actor's body times ``scale``, the actor's own position and everything
+    else (velocities, headings) as they are, ``(..., d) → (..., n, d)``. The offsets are the
+    numbers a pursuit rule reads, so a network need not learn to subtract coordinates, and
+    they are the same wherever in the arena a configuration occurs (random starts). With
+    ``scale`` the arena's length over the observation's unit (``encoding = "metric"``) they
+    are in metres (cells on a grid): a body 1 m away reads the same on every arena size,
+    where as fractions of the arena it reads 0.1 on 10 × 10, a tenth of what it reads at
+    10 m, and the direction to a near evader turns within small inputs.
 
     The map is linear, ``x_i = M_i x``: :attr:`matrices` ``(n, d, d)`` hold the ``M_i``
     (an export folds them into each actor's first layer, ``W M_i``).
@@ -52,9 +56,10 @@ class RelativePositions:
         obs_dim: length of the observation.
         first: the body of the first actor; actor ``j`` is body ``first + j``.
         n: how many actors.
+        scale: what the offsets are multiplied by (1: fractions of the arena).
     """
 
-    def __init__(self, bodies: int, obs_dim: int, first: int, n: int) -> None:
+    def __init__(self, bodies: int, obs_dim: int, first: int, n: int, scale: float = 1.0) -> None:
         if first < 0 or first + n > bodies or 2 * bodies > obs_dim:
             raise ValueError(
                 f"relative positions of actors {first}…{first + n - 1} need them among"
@@ -65,9 +70,10 @@ class RelativePositions:
             own = first + j
             for body in range(bodies):
                 if body != own:
-                    for c in range(2):  # x_body - x_own, y_body - y_own
-                        m[j, 2 * body + c, 2 * own + c] = -1.0
-        self.matrices = m
+                    for c in range(2):  # scale · (x_body - x_own), scale · (y_body - y_own)
+                        row = 2 * body + c
+                        m[j, row, row], m[j, row, 2 * own + c] = scale, -scale
+        self.matrices, self.scale = m, scale
         self._torch = torch.from_numpy(m)
 
     def torch(self, obs: torch.Tensor) -> torch.Tensor:

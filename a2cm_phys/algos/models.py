@@ -11,7 +11,8 @@ Two options go beyond the paper (``Train.layers``, ``Train.encoding``): more hid
 of the same width, and, on grids, the input as one one-hot of each coordinate's cell
 (:class:`~a2cm_phys.algos.encoding.OneHotCells`) instead of the coordinates themselves, or
 each actor's input seen from its own body, the others' positions as offsets
-(:class:`~a2cm_phys.algos.encoding.RelativePositions`, ``encoding = "relative"``).
+(:class:`~a2cm_phys.algos.encoding.RelativePositions`, ``encoding = "relative"``, or in
+metres or cells, ``"metric"``).
 With the defaults (one layer, the raw observation) the networks are the paper's, weight for
 weight.
 
@@ -156,6 +157,8 @@ class ActorCritic(nn.Module):
         self.obs_dim, self.n_agents, self.hidden = obs_dim, n_agents, hidden
         self.shared_critic, self.n_values = shared_critic, n_values
         self.encoding, self.sensed, self.relative = encoding, sensed, relative
+        # the inputs hold the trained arena's size (one-hot cells, metric offsets): one size
+        self.arena_bound = encoding is not None or getattr(relative, "scale", 1.0) != 1.0
         c = critics(n_agents, shared_critic)
         inputs, critic_inputs = _input_sizes(obs_dim, encoding, sensed, shared_critic)
         critic_inputs += critic_memory
@@ -172,11 +175,8 @@ class ActorCritic(nn.Module):
         self.critic_deep = nn.ModuleList(
             StackedLinear(c, hidden, hidden, generator) for _ in range(layers - 1)
         )
-        self.log_std = (
-            nn.Parameter(torch.full((n_agents, dist.n_outputs), float(log_std_init)))
-            if dist.has_log_std
-            else None
-        )
+        shape, std = (n_agents, dist.n_outputs), log_std_init
+        self.log_std = nn.Parameter(torch.full(shape, float(std))) if dist.has_log_std else None
         self._numpy_actors = self._snapshot()
 
     @property

@@ -75,8 +75,8 @@ def positions_from_obs(scenario: Scenario, obs: np.ndarray) -> np.ndarray:
     n = scenario.pursuers + 1
     xy = obs[:, : 2 * n].reshape(len(obs), n, 2)
     if scenario.mode == "grid":
-        return np.rint(xy * (scenario.size - 1)).astype(np.int64)
-    return xy * scenario.size
+        return np.rint(xy * scenario.position_unit).astype(np.int64)
+    return xy * scenario.position_unit
 
 
 def headings_from_obs(scenario: Scenario, obs: np.ndarray) -> np.ndarray | None:
@@ -323,13 +323,13 @@ actions (``control``: moves or commands; ``actions``: how many moves)."""
 def check_layout(trained: Scenario, scenario: Scenario, run: str, model: Any = None) -> None:
     """A :class:`~a2cm_phys.config.ConfigError` naming ``run`` and the first key of
     :data:`LAYOUT_KEYS` in which ``scenario`` differs from the one the run was ``trained``
-    on (or ``size``, for networks over one-hot cells, ``model.encoding``): its networks
+    on (or ``size``, for networks whose inputs hold the arena's size, one-hot cells or
+    metric offsets: ``model.arena_bound``): its networks
     read the trained observation and play the trained actions, and nothing else. A
     scenario with more moves than the run's (5 with stay, for a run of 4) is accepted: the
     run plays a subset of them."""
     keys = [k for k in LAYOUT_KEYS if k != "actions" or not trained.continuous]
-    encoding = getattr(model, "encoding", None)
-    if encoding is not None:  # one-hot inputs: one per cell of the trained arena
+    if getattr(model, "arena_bound", False):
         keys.append("size")
     for key in keys:
         want, got = getattr(trained, key), getattr(scenario, key)

@@ -229,17 +229,17 @@ def check_train(scenario: Scenario, cfg: Train) -> None:
 
 
 def _check_encoding(scenario: Scenario, cfg: Train) -> None:
-    """One-hot inputs need a grid; relative inputs the global observation of memoryless
-    actors."""
+    """One-hot inputs need a grid; relative (and metric) inputs the global observation of
+    memoryless actors."""
     if cfg.encoding == "onehot" and scenario.mode != "grid":
         raise ConfigError(
             "training options: key 'encoding': one-hot cells need a grid, and scenario"
             f" '{scenario.name}' is in {scenario.mode} mode (use encoding = 'xy')"
         )
-    if cfg.encoding == "relative" and (scenario.sensing.on or cfg.recurrent != "none"):
+    if cfg.encoding in ("relative", "metric") and (scenario.sensing.on or cfg.recurrent != "none"):
         what = "sensing" if scenario.sensing.on else f"recurrent = '{cfg.recurrent}'"
         raise ConfigError(
-            "training options: key 'encoding': relative inputs are made from the global"
+            f"training options: key 'encoding': {cfg.encoding} inputs are made from the global"
             f" observation of memoryless actors, and this run has {what} (use encoding ="
             " 'xy')"
         )

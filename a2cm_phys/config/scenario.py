@@ -243,7 +243,7 @@ class Scenario:
             reach = (ph.box_side / 2**0.5, ph.evader_radius) if self.mode == "physics" else None
             check_obstacles(self.obstacles, self.size, self.pursuers, reach, self.start.random)
         if self.start.random:
-            self._check_start_room()
+            _check_start_room(self)
         if self.mode == "physics":
             self.physics.check_substeps()
         else:
@@ -264,43 +264,6 @@ class Scenario:
         ``(size²,)`` bool; all ``False`` without obstacles."""
         return blocked_cells(self.size, self.obstacles)
 
-    def _check_start_room(self) -> None:
-        """Refuse a ``start.min_evader_distance`` no start can keep: on a grid, exactly (no
-        free evader cell with ``pursuers`` free cells that far); in physics, beyond the
-        farthest a pursuer's centre can be from the evader's."""
-        d, n = self.start.min_evader_distance, self.size
-        if self.mode == "grid":
-            # an evader in a corner has the most cells that far (along any row or column a
-            # border cell is the farthest from most cells): count the cells x + y >= d
-            need = max(math.ceil(d), 1)
-            room = sum(max(0, n - max(0, need - x)) for x in range(n))
-            farthest = f"{self.pursuers} cells that far from any evader cell"
-            if self.obstacles and room >= self.pursuers:
-                # count the free cells that far from each free evader cell, those nearest a
-                # corner first (the likeliest to have room), until one has room
-                free = np.flatnonzero(~self.blocked_cells())
-                y, x = np.divmod(free, n)
-                corner = np.minimum(x, n - 1 - x) + np.minimum(y, n - 1 - y)
-                order = np.argsort(corner, kind="stable")
-                step, room = max(1, 2**22 // len(free)), 0
-                for lo in range(0, len(free), step):
-                    e = order[lo : lo + step]
-                    far = np.abs(x[e, None] - x) + np.abs(y[e, None] - y) >= need
-                    room = max(room, int(far.sum(axis=1).max()))
-                    if room >= self.pursuers:
-                        break
-                farthest = f"{self.pursuers} free cells that far from any free evader cell"
-        else:
-            span = n - self.physics.box_side / 2 - self.physics.evader_radius
-            room = self.pursuers if d <= span * 2**0.5 else 0
-            farthest = f"a pursuer farther than {span * 2**0.5:.3g} m from the evader"
-        if room < self.pursuers:
-            raise InvalidKey(
-                "start.min_evader_distance",
-                f"{d:g} leaves no valid random start (the {n}x{n} arena has no room for "
-                f"{farthest})",
-            )
-
     @property
     def continuous(self) -> bool:
         """Whether pursuers steer with velocity commands (SPEC §3b) rather than discrete moves."""
@@ -316,6 +279,12 @@ class Scenario:
         """Whether the pursuers have headings (physics mode, ``physics.drive =
         "differential"``)."""
         return self.mode == "physics" and self.physics.drive == "differential"
+
+    @property
+    def position_unit(self) -> float:
+        """What the observation divides positions by (SPEC §5): ``size`` metres in physics,
+        ``size - 1`` cells on a grid, so that they lie in [0, 1]."""
+        return float(self.size if self.mode == "physics" else self.size - 1)
 
     @property
     def state_dim(self) -> int:
@@ -357,3 +326,40 @@ SCENARIO_LIMITS: dict[str, tuple[int, str]] = {
 }
 """Largest values a scenario may ask for, with the reason: beyond them memory runs out, or
 a step takes so long that a run seems to hang. A dotted key is a key of a sub-table."""
+
+
+def _check_start_room(sc: Scenario) -> None:
+    """Refuse a ``start.min_evader_distance`` no start can keep: on a grid, exactly (no
+    free evader cell with ``pursuers`` free cells that far); in physics, beyond the
+    farthest a pursuer's centre can be from the evader's."""
+    d, n = sc.start.min_evader_distance, sc.size
+    if sc.mode == "grid":
+        # an evader in a corner has the most cells that far (along any row or column a
+        # border cell is the farthest from most cells): count the cells x + y >= d
+        need = max(math.ceil(d), 1)
+        room = sum(max(0, n - max(0, need - x)) for x in range(n))
+        farthest = f"{sc.pursuers} cells that far from any evader cell"
+        if sc.obstacles and room >= sc.pursuers:
+            # count the free cells that far from each free evader cell, those nearest a
+            # corner first (the likeliest to have room), until one has room
+            free = np.flatnonzero(~sc.blocked_cells())
+            y, x = np.divmod(free, n)
+            corner = np.minimum(x, n - 1 - x) + np.minimum(y, n - 1 - y)
+            order = np.argsort(corner, kind="stable")
+            step, room = max(1, 2**22 // len(free)), 0
+            for lo in range(0, len(free), step):
+                e = order[lo : lo + step]
+                far = np.abs(x[e, None] - x) + np.abs(y[e, None] - y) >= need
+                room = max(room, int(far.sum(axis=1).max()))
+                if room >= sc.pursuers:
+                    break
+            farthest = f"{sc.pursuers} free cells that far from any free evader cell"
+    else:
+        span = n - sc.physics.box_side / 2 - sc.physics.evader_radius
+        room = sc.pursuers if d <= span * 2**0.5 else 0
+        farthest = f"a pursuer farther than {span * 2**0.5:.3g} m from the evader"
+    if room < sc.pursuers:
+        raise InvalidKey(
+            "start.min_evader_distance",
+            f"{d:g} leaves no valid random start (the {n}x{n} arena has no room for {farthest})",
+        )

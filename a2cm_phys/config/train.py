@@ -11,7 +11,7 @@ from .parse import ConfigError, InvalidKey, check_limits
 Algo = Literal["a2c", "a2cm"]
 Optimizer = Literal["rmsprop", "adam"]
 Schedule = Literal["constant", "linear"]
-Encoding = Literal["xy", "onehot", "relative"]
+Encoding = Literal["xy", "onehot", "relative", "metric"]
 DescentTeams = Literal["pursuers", "both"]
 Recurrent = Literal["none", "gru"]
 
@@ -52,7 +52,8 @@ class Train:
     hidden: int = 128
     layers: int = 1  # hidden layers of every actor and critic (the paper's: 1)
     # the networks' input: the observation, one-hot cells (grid), or "relative": each actor's
-    # from its own body, the others' positions as offsets (algos/encoding.py)
+    # from its own body, the others' positions as offsets (algos/encoding.py); "metric": the
+    # same offsets in metres (cells on a grid), not fractions of the arena
     encoding: Encoding = "xy"
     # "gru": each actor carries a GRU state across an episode (algos/recurrent.py), learnt by
     # back-propagation through each rollout (batch_size / num_envs steps)

@@ -172,10 +172,12 @@ class Team:
         self.clip = pursuer_clip(policy)
         """How the pursuers' continuous commands are limited (the evader's: its actor's)."""
         kind = policy["observation"]["encoding"]["kind"]
-        self.encoding: str | None = None if kind in ("xy", "relative") else kind
-        """``None`` when the actors read the observation itself (relative inputs are folded
-        into their first layers); ``"onehot"`` when they
-        read one-hot cells (then they know one arena size only)."""
+        self.encoding: str | None = None if kind in ("xy", "relative", "metric") else kind
+        """``None`` when the actors read the observation itself (relative and metric inputs
+        are folded into their first layers); ``"onehot"`` when they
+        read one-hot cells."""
+        self.arena_bound = kind in ("onehot", "metric")
+        """Whether the actors know one arena size only (one-hot cells, metric offsets)."""
         size = policy["observation"]["size"]
         for agent, actor in self.actors.items():
             if actor.obs_dim != size or actor.continuous != self.continuous:

@@ -52,6 +52,15 @@ def observation_section(scenario: Scenario, encoding: str) -> dict[str, Any]:
             "rule": "none in the graph: trained on each actor's view from its own body (the"
             " others' positions minus its own), a linear map folded into its first layer",
         }
+    elif encoding == "metric":
+        unit = "m" if scenario.mode == "physics" else "cells"
+        encoded = {
+            "kind": "metric",
+            "scale": scenario.position_unit,
+            "rule": "none in the graph: trained on each actor's view from its own body (the"
+            f" others' positions minus its own, times scale: in {unit} on this arena), a"
+            " linear map folded into its first layer; the actors play this arena size only",
+        }
     else:
         encoded = {"kind": "xy", "rule": "none: the network reads the observation itself"}
     return {
