@@ -10,7 +10,10 @@ share of commands shorter than 0.95 by the pursuer's distance to the evader and 
 circle (the same directions at full speed) and `pursuit` beside them. A team whose
 full-speed twin is much faster is losing time to short commands near the evader, where an
 actor's output, a continuous function of the offset, must turn fast (``BENCHMARKS.md``, "the
-soft bound on the means").
+soft bound on the means"). Last, the phases of a game: the team and `pursuit` play the same
+``--starts`` starts once each (no restarts), and the script prints the mean steps until the
+nearest pursuer first comes within 3, 1.5 and 1 m of the evader (centre to centre) and the
+steps from there to the end: where in a game the team loses its time.
 """
 
 from __future__ import annotations
@@ -22,10 +25,34 @@ import torch
 
 from a2cm_phys.analysis.evaluation import play
 from a2cm_phys.analysis.policies import positions_from_obs, pursuit_policy
+from a2cm_phys.envs.physics import PhysicsCore
 from a2cm_phys.envs.vector import VectorEnv
 from a2cm_phys.training.runs import load_trained_run, model_policy
 
 BANDS = ((0.0, 0.8), (0.8, 1.5), (1.5, 2.5), (2.5, np.inf))  # metres, centre to centre
+PHASES = (3.0, 1.5, 1.0)  # metres, centre to centre
+
+
+def phases(scenario, policy, starts: int, seed: int) -> tuple[float, list[float]]:
+    """Mean steps of ``starts`` games from seeded starts, played once each, and the mean
+    step at which the nearest pursuer first comes within each of :data:`PHASES` metres of
+    the evader (a game's length if it never does)."""
+    seeds = np.random.default_rng(seed).integers(0, 2**63, starts).astype(np.uint64)
+    core, rng = PhysicsCore(scenario, starts), np.random.default_rng(seed)
+    core.reset(np.arange(starts), seeds)
+    length, first = np.zeros(starts, int), np.full((len(PHASES), starts), -1)
+    done, t = np.zeros(starts, bool), 0
+    while not done.all():
+        pos = core.positions()
+        near = np.linalg.norm(pos[:, :-1] - pos[:, -1:], axis=-1).min(1)
+        for k, radius in enumerate(PHASES):
+            first[k, (first[k] < 0) & (near < radius) & ~done] = t
+        out = core.step(np.asarray(policy(core.observe(), rng)))
+        t += 1
+        ended = (out.terminated | out.truncated) & ~done
+        length[ended], done = t, done | ended
+    first = np.where(first < 0, length, first)
+    return float(length.mean()), [float(f.mean()) for f in first]
 
 
 def main() -> None:
@@ -34,6 +61,7 @@ def main() -> None:
     p.add_argument("run", help="a run directory of a continuous physics scenario")
     p.add_argument("--episodes", type=int, default=2000)
     p.add_argument("--seed", type=int, default=12345)
+    p.add_argument("--starts", type=int, default=500, help="games of the phase split")
     args = p.parse_args()
     torch.set_num_threads(1)
     run = load_trained_run(args.run)
@@ -70,6 +98,11 @@ def main() -> None:
     }
     for name, value in steps.items():
         print(f"{name}: {value:.3f} steps, {value / steps['pursuit']:.4f}x pursuit")
+    print(f"phases over {args.starts} starts (steps until the nearest pursuer is within):")
+    for name in ("greedy", "pursuit"):
+        length, first = phases(scenario, teams[name], args.starts, args.seed)
+        within = ", ".join(f"{r:g} m {f:.2f}" for r, f in zip(PHASES, first, strict=True))
+        print(f"  {name}: {within}; from {PHASES[-1]:g} m to the end {length - first[-1]:.2f}")
 
 
 if __name__ == "__main__":
