@@ -43,9 +43,9 @@ class RelativePositions:
     numbers a pursuit rule reads, so a network need not learn to subtract coordinates, and
     they are the same wherever in the arena a configuration occurs (random starts). With
     ``scale`` the arena's length over the observation's unit (``encoding = "metric"``) they
-    are in metres (cells on a grid): a body 1 m away reads the same on every arena size,
-    where as fractions of the arena it reads 0.1 on 10 × 10, a tenth of what it reads at
-    10 m, and the direction to a near evader turns within small inputs.
+    are in metres (cells on a grid): a body 1 m away reads 1 on every arena size, where as
+    a fraction of a 10 × 10 arena it reads 0.1, and the direction to a near evader turns
+    within inputs that small.
 
     The map is linear, ``x_i = M_i x``: :attr:`matrices` ``(n, d, d)`` hold the ``M_i``
     (an export folds them into each actor's first layer, ``W M_i``).

@@ -157,7 +157,7 @@ class ActorCritic(nn.Module):
         self.obs_dim, self.n_agents, self.hidden = obs_dim, n_agents, hidden
         self.shared_critic, self.n_values = shared_critic, n_values
         self.encoding, self.sensed, self.relative = encoding, sensed, relative
-        # the inputs hold the trained arena's size (one-hot cells, metric offsets): one size
+        # inputs that hold the trained arena's size (one-hot cells, metric offsets) play it only
         self.arena_bound = encoding is not None or getattr(relative, "scale", 1.0) != 1.0
         c = critics(n_agents, shared_critic)
         inputs, critic_inputs = _input_sizes(obs_dim, encoding, sensed, shared_critic)
