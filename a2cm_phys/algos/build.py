@@ -20,7 +20,7 @@ from .models import ActorCritic, SensedInputs
 from .recurrent import RecurrentActorCritic
 
 if TYPE_CHECKING:
-    from ..config import Scenario, Train
+    from ..config import Encoding, Scenario, Train
 
 __all__ = ["action_distribution", "make_model"]
 
@@ -81,7 +81,7 @@ def make_model(
 
 
 def relative_positions(
-    scenario: Scenario, agents: int, encoding: str = "relative"
+    scenario: Scenario, agents: int, encoding: Encoding
 ) -> RelativePositions | None:
     """Each of a team's ``agents`` actors' view from its own body: the pursuers' (the
     first bodies), or a team of one in a scenario with a learned evader, that evader's;

@@ -158,7 +158,7 @@ class ActorCritic(nn.Module):
         self.shared_critic, self.n_values = shared_critic, n_values
         self.encoding, self.sensed, self.relative = encoding, sensed, relative
         # inputs that hold the trained arena's size (one-hot cells, metric offsets) play it only
-        self.arena_bound = encoding is not None or getattr(relative, "scale", 1.0) != 1.0
+        self.arena_bound = encoding is not None or (relative is not None and relative.scale != 1)
         c = critics(n_agents, shared_critic)
         inputs, critic_inputs = _input_sizes(obs_dim, encoding, sensed, shared_critic)
         critic_inputs += critic_memory
